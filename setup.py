@@ -1,0 +1,44 @@
+"""CAT: collision-free humanoid traversal in cluttered indoor scenes (HumanoidPF + hybrid scenes)."""
+
+from setuptools import find_packages, setup
+
+setup(
+    name="cat-humanoid",
+    version="0.1.0",
+    description="Collision-free humanoid traversal with HumanoidPF (PyTorch / MuJoCo / Warp re-implementation)",
+    python_requires=">=3.10",
+    packages=find_packages(include=["cat", "cat.*"]),
+    include_package_data=True,
+    install_requires=[
+        # torch is installed first (CPU build) by the user or .ci/run; a range keeps pip from swapping it.
+        "torch>=2.4",
+        "numpy>=1.26",
+        "scipy>=1.11",
+        "rsl-rl-lib==5.5.1",
+        "tensordict>=0.10",
+        "mujoco==4.0.0",
+        "mujoco-warp==4.0.0",
+        "warp-lang==1.19.0",
+        "mujoco-menagerie>=2026.10.4",
+        "trimesh>=4.0",
+        "rtree>=1.2",
+        "coacd>=1.0.5",
+        "pytorch-kinematics>=0.7",
+        "rerun-sdk==0.41.0",
+        "hydra-core>=1.3",
+        "omegaconf>=2.3",
+        "scikit-image>=0.22",
+        "pyyaml>=6.0",
+        "tqdm>=4.66",
+        "matplotlib>=3.8",
+    ],
+    extras_require={
+        "dev": [
+            "pytest>=8",
+            "pytest-benchmark>=4",
+            "ruff>=0.6",
+            "scikit-fmm>=2024.5",
+            "embreex>=2.17; platform_machine=='x86_64'",
+        ],
+    },
+)

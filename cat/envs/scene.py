@@ -1,0 +1,60 @@
+"""Compose the simulated scene: G1 + floor (+ obstacles) + the sensors the env reads."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import mujoco
+
+from cat.envs.robot import OBSTACLE_BODY, RobotCfg, compile_model, robot_spec
+
+COLLISION_SENSOR = "robot_obstacle_contact"
+
+
+def query_pos_sensor(name: str) -> str:
+    return f"qpos_{name}"
+
+
+def query_vel_sensor(name: str) -> str:
+    return f"qvel_{name}"
+
+
+def foot_contact_sensor(foot_body: str) -> str:
+    return f"floor_contact_{foot_body}"
+
+
+def build_env_model(
+    robot: RobotCfg, add_obstacles: Callable[[mujoco.MjSpec], None] | None = None
+) -> mujoco.MjModel:
+    """Compile G1 + floor, optionally obstacles (``add_obstacles(spec)``), plus env sensors.
+
+    Sensors added (world frame): position and linear velocity of each query site, floor contact count per
+    foot, and (when the spec has an ``obstacles`` body) the number of robot-obstacle contacts.
+    """
+    spec = robot_spec(robot)
+    if add_obstacles is not None:
+        add_obstacles(spec)
+    for site in robot.query_site_names:
+        name = site.removeprefix("query_")
+        spec.add_sensor(
+            name=query_pos_sensor(name), type=mujoco.mjtSensor.mjSENS_FRAMEPOS,
+            objtype=mujoco.mjtObj.mjOBJ_SITE, objname=site,
+        )
+        spec.add_sensor(
+            name=query_vel_sensor(name), type=mujoco.mjtSensor.mjSENS_FRAMELINVEL,
+            objtype=mujoco.mjtObj.mjOBJ_SITE, objname=site,
+        )
+    found = [1, 0, 1]  # data = found (contact count), no reduction, one slot
+    for foot in robot.feet:
+        spec.add_sensor(
+            name=foot_contact_sensor(foot), type=mujoco.mjtSensor.mjSENS_CONTACT,
+            objtype=mujoco.mjtObj.mjOBJ_BODY, objname=foot,
+            reftype=mujoco.mjtObj.mjOBJ_GEOM, refname="floor", intprm=found,
+        )
+    if spec.body(OBSTACLE_BODY) is not None:
+        spec.add_sensor(
+            name=COLLISION_SENSOR, type=mujoco.mjtSensor.mjSENS_CONTACT,
+            objtype=mujoco.mjtObj.mjOBJ_XBODY, objname=robot.root_body,
+            reftype=mujoco.mjtObj.mjOBJ_BODY, refname=OBSTACLE_BODY, intprm=found,
+        )
+    return compile_model(spec)

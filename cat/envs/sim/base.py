@@ -1,0 +1,105 @@
+"""One interface for the physics backends (MuJoCo C threads, mujoco_warp).
+
+A backend owns N copies of one compiled ``MjModel`` and exposes their state as torch tensors. Everything
+the env needs beyond qpos/qvel (site poses and velocities, IMU, contacts) is read from MuJoCo *sensors*
+that the scene builder adds to the model, so both backends produce it inside the simulator.
+
+Timing convention (both backends): ``step`` holds ``ctrl`` for ``decimation`` physics steps. ``qpos`` and
+``qvel`` are the state after the last step; ``sensordata`` is computed by MuJoCo at the start of the last
+physics step (one physics step, 5 ms, before ``qpos``), as ``mj_step`` does. ``reset`` recomputes
+sensors for the reset worlds from their new state.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+import torch
+
+
+@dataclass
+class SensorSlice:
+    """Where one named sensor lives in ``sensordata``."""
+
+    adr: int
+    dim: int
+
+
+class PhysicsBackend(ABC):
+    """N parallel worlds of one MuJoCo model, stepped with PD targets and decimation inside the simulator."""
+
+    #: torch device of all exposed tensors
+    device: torch.device
+
+    def __init__(self, model: mujoco.MjModel, num_envs: int, decimation: int):
+        if num_envs < 1:
+            raise ValueError(f"num_envs must be >= 1, got {num_envs}")
+        if decimation < 1:
+            raise ValueError(f"decimation must be >= 1, got {decimation}")
+        self.model = model
+        self.num_envs = num_envs
+        self.decimation = decimation
+        self.sensors = {
+            model.sensor(i).name: SensorSlice(int(model.sensor_adr[i]), int(model.sensor_dim[i]))
+            for i in range(model.nsensor)
+        }
+
+    # --- state views (N, ...) --------------------------------------------------------------------------
+    @property
+    @abstractmethod
+    def qpos(self) -> torch.Tensor:
+        """(N, nq) generalized positions after the last step."""
+
+    @property
+    @abstractmethod
+    def qvel(self) -> torch.Tensor:
+        """(N, nv) generalized velocities after the last step."""
+
+    @property
+    @abstractmethod
+    def sensordata(self) -> torch.Tensor:
+        """(N, nsensordata) sensor readings (see the module docstring for their timing)."""
+
+    def sensor(self, name: str) -> torch.Tensor:
+        """(N, dim) view of one named sensor."""
+        try:
+            s = self.sensors[name]
+        except KeyError:
+            raise KeyError(f"no sensor {name!r}; model sensors: {sorted(self.sensors)}") from None
+        return self.sensordata[:, s.adr : s.adr + s.dim]
+
+    # --- control -------------------------------------------------------------------------------------
+    @abstractmethod
+    def step(self, ctrl: torch.Tensor) -> None:
+        """Apply actuator controls ``ctrl`` (N, nu) (PD position targets) for ``decimation`` physics steps."""
+
+    @abstractmethod
+    def reset(self, env_ids: torch.Tensor, qpos: torch.Tensor, qvel: torch.Tensor) -> None:
+        """Set the state of worlds ``env_ids`` (qpos (k, nq), qvel (k, nv)) and recompute their sensors."""
+
+    # --- domain randomisation -------------------------------------------------------------------------
+    def set_actuator_gains(self, env_ids: torch.Tensor, kp: torch.Tensor, kd: torch.Tensor) -> None:
+        """Per-world PD gains (k, nu); backends that cannot randomise raise ``NotImplementedError``."""
+        raise NotImplementedError(f"{type(self).__name__} does not support per-world actuator gains")
+
+    def set_body_mass_scale(self, env_ids: torch.Tensor, scale: torch.Tensor) -> None:
+        """Per-world body mass scale (k, nbody)."""
+        raise NotImplementedError(f"{type(self).__name__} does not support per-world body masses")
+
+
+def state_layout(model: mujoco.MjModel) -> tuple[int, int, int]:
+    """(nstate, qpos offset, qvel offset) of ``mjSTATE_FULLPHYSICS`` state vectors."""
+    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    nstate = mujoco.mj_stateSize(model, spec)
+    qpos_adr = mujoco.mj_stateSize(model, mujoco.mjtState.mjSTATE_TIME)
+    return nstate, qpos_adr, qpos_adr + model.nq
+
+
+def as_index(env_ids: torch.Tensor | np.ndarray | list[int]) -> np.ndarray:
+    """Env ids as a 1-D int64 numpy array (host)."""
+    if isinstance(env_ids, torch.Tensor):
+        return env_ids.detach().to("cpu", torch.int64).numpy().reshape(-1)
+    return np.asarray(env_ids, dtype=np.int64).reshape(-1)

@@ -37,24 +37,36 @@ def build_env_model(
     for site in robot.query_site_names:
         name = site.removeprefix("query_")
         spec.add_sensor(
-            name=query_pos_sensor(name), type=mujoco.mjtSensor.mjSENS_FRAMEPOS,
-            objtype=mujoco.mjtObj.mjOBJ_SITE, objname=site,
+            name=query_pos_sensor(name),
+            type=mujoco.mjtSensor.mjSENS_FRAMEPOS,
+            objtype=mujoco.mjtObj.mjOBJ_SITE,
+            objname=site,
         )
         spec.add_sensor(
-            name=query_vel_sensor(name), type=mujoco.mjtSensor.mjSENS_FRAMELINVEL,
-            objtype=mujoco.mjtObj.mjOBJ_SITE, objname=site,
+            name=query_vel_sensor(name),
+            type=mujoco.mjtSensor.mjSENS_FRAMELINVEL,
+            objtype=mujoco.mjtObj.mjOBJ_SITE,
+            objname=site,
         )
     found = [1, 0, 1]  # data = found (contact count), no reduction, one slot
     for foot in robot.feet:
         spec.add_sensor(
-            name=foot_contact_sensor(foot), type=mujoco.mjtSensor.mjSENS_CONTACT,
-            objtype=mujoco.mjtObj.mjOBJ_BODY, objname=foot,
-            reftype=mujoco.mjtObj.mjOBJ_GEOM, refname="floor", intprm=found,
+            name=foot_contact_sensor(foot),
+            type=mujoco.mjtSensor.mjSENS_CONTACT,
+            objtype=mujoco.mjtObj.mjOBJ_BODY,
+            objname=foot,
+            reftype=mujoco.mjtObj.mjOBJ_GEOM,
+            refname="floor",
+            intprm=found,
         )
     if spec.body(OBSTACLE_BODY) is not None:
         spec.add_sensor(
-            name=COLLISION_SENSOR, type=mujoco.mjtSensor.mjSENS_CONTACT,
-            objtype=mujoco.mjtObj.mjOBJ_XBODY, objname=robot.root_body,
-            reftype=mujoco.mjtObj.mjOBJ_BODY, refname=OBSTACLE_BODY, intprm=found,
+            name=COLLISION_SENSOR,
+            type=mujoco.mjtSensor.mjSENS_CONTACT,
+            objtype=mujoco.mjtObj.mjOBJ_XBODY,
+            objname=robot.root_body,
+            reftype=mujoco.mjtObj.mjOBJ_BODY,
+            refname=OBSTACLE_BODY,
+            intprm=found,
         )
     return compile_model(spec)

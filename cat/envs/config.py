@@ -1,0 +1,114 @@
+"""Env configuration: plain dataclasses built by task factories (``cat.envs.tasks``), overridable by hydra."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+
+@dataclass
+class CommandCfg:
+    """Goal sampling and the velocity command derived from the field at the root."""
+
+    goal_radius: tuple[float, float] = (1.5, 2.5)  # flat task: goal distance from the start [m]
+    goal_height: float = 0.75  # z of the goal point (about pelvis height) [m]
+    start_xy_range: float = 1.0  # start offset U(-r, r) per axis (flat task; scenes use their start)
+    start_yaw_range: float = 1.5708  # start yaw U(-r, r) relative to the goal direction [rad]
+    speed: float = 0.6  # commanded root speed along the field [m/s]
+    slow_radius: float = 0.3  # speed decays as (d/slow_radius)^3 inside this goal distance [m]
+
+
+@dataclass
+class FieldObsCfg:
+    """How HumanoidPF enters the observation (paper eq. OBS_field)."""
+
+    enabled: bool = True  # False = the "w/o OBS_field" ablation (field block zeroed)
+    refresh_hz: float = 10.0  # field block refresh rate, mimics 10 Hz odometry / mapping
+    sdf_clip: float = 1.0  # SDF values are clipped to [-sdf_clip, sdf_clip] in the observation [m]
+
+
+@dataclass
+class NoiseCfg:
+    """Uniform observation noise U(-s, s) per actor term (zero disables)."""
+
+    enabled: bool = True
+    gyro: float = 0.2
+    gravity: float = 0.05
+    joint_pos: float = 0.01
+    joint_vel: float = 1.5
+    field: float = 0.05
+
+
+@dataclass
+class DomainRandCfg:
+    """Per-episode physics randomisation (DESIGN.md §5)."""
+
+    enabled: bool = False
+    kp_scale: tuple[float, float] = (0.75, 1.25)
+    kd_scale: tuple[float, float] = (0.75, 1.25)
+    mass_scale: tuple[float, float] = (0.9, 1.1)
+
+
+@dataclass
+class PushCfg:
+    enabled: bool = False
+    interval_s: tuple[float, float] = (5.0, 10.0)
+    speed: tuple[float, float] = (0.1, 1.0)  # horizontal root velocity kick [m/s]
+
+
+@dataclass
+class RewardCfg:
+    """Reward weights; a zero weight removes the term. Terms live in ``cat.envs.mdp.rewards``."""
+
+    field_vmf: float = 0.05  # R_field, the paper's vMF log-likelihood (eq. R_field)
+    track_velocity: float = 1.5
+    track_heading: float = 0.5
+    goal_proximity: float = 1.0
+    alive: float = 0.5
+    orientation: float = -2.0
+    lin_vel_z: float = -0.5
+    ang_vel_xy: float = -0.05
+    action_rate: float = -0.01
+    torques: float = -1.0e-5
+    joint_limits: float = -1.0
+    feet_phase_contact: float = 0.3
+    feet_clearance: float = -5.0
+    feet_slip: float = -0.1
+    knee_straight: float = -0.1
+    sdf_barrier: float = -0.2
+    collision: float = 0.0  # the "w/o R_field" baseline sets this negative
+    termination: float = -20.0
+
+
+@dataclass
+class TerminationCfg:
+    min_base_height: float = 0.35  # [m]
+    max_tilt: float = 1.0  # |projected gravity xy|, ~ sin of tilt
+    on_collision: bool = False  # end the episode on any robot-obstacle contact
+
+
+@dataclass
+class SuccessCfg:
+    """The paper's metric: within ``radius`` of the goal within ``time_s`` of simulated time, no collision."""
+
+    radius: float = 0.1  # horizontal root-goal distance [m]
+    time_s: float = 5.0
+
+
+@dataclass
+class EnvCfg:
+    """A traversal task: scene source + MDP terms."""
+
+    task: str = "flat"
+    num_envs: int = 64
+    episode_length_s: float = 20.0
+    scene_dir: str | None = None  # folder of scenes (cat.terrain); None = flat ground
+    action_clip: float = 1.0
+    gait_freq: tuple[float, float] = (1.3, 1.5)  # gait clock frequency [Hz]
+    command: CommandCfg = field(default_factory=CommandCfg)
+    field_obs: FieldObsCfg = field(default_factory=FieldObsCfg)
+    noise: NoiseCfg = field(default_factory=NoiseCfg)
+    domain_rand: DomainRandCfg = field(default_factory=DomainRandCfg)
+    push: PushCfg = field(default_factory=PushCfg)
+    rewards: RewardCfg = field(default_factory=RewardCfg)
+    terminations: TerminationCfg = field(default_factory=TerminationCfg)
+    success: SuccessCfg = field(default_factory=SuccessCfg)

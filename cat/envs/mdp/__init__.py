@@ -1,0 +1,1 @@
+"""MDP terms: observations, rewards and terminations as plain functions of the env."""

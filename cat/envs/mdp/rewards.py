@@ -1,0 +1,124 @@
+"""Reward terms (per control step, before weighting). Weights live in ``RewardCfg``; the name matches."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import torch
+import torch.nn.functional as F
+
+from cat.envs._pf_compat import vmf_log_likelihood
+
+if TYPE_CHECKING:
+    from cat.envs.traversal_env import TraversalEnv
+
+
+def field_vmf(env: TraversalEnv) -> torch.Tensor:
+    """R_field = sum_k [log C_3(kappa_k) + kappa_k mu_k . v_k/|v_k|] (paper, eq. R_field)."""
+    fh = env.humanoid_pf
+    norm = fh.norm(dim=-1)
+    mu = fh / norm.unsqueeze(-1).clamp_min(1e-9)
+    kappa = env.kappa_max * norm
+    vel = env.state.link_vel
+    v_hat = vel / vel.norm(dim=-1, keepdim=True).clamp_min(1e-6)
+    return vmf_log_likelihood(mu, kappa, v_hat).sum(dim=-1)
+
+
+def track_velocity(env: TraversalEnv) -> torch.Tensor:
+    """Root horizontal velocity tracks the field command (speed along F_H at the root)."""
+    err = (env.state.root_lin_vel[:, :2] - env.command_vel).square().sum(dim=-1)
+    return torch.exp(-err / 0.25)
+
+
+def track_heading(env: TraversalEnv) -> torch.Tensor:
+    """Face the commanded direction (only while the command is non-negligible)."""
+    cmd = env.command_vel
+    speed = cmd.norm(dim=-1)
+    heading = torch.stack((torch.cos(env.state.yaw), torch.sin(env.state.yaw)), dim=-1)
+    cos = (heading * cmd).sum(dim=-1) / speed.clamp_min(1e-6)
+    return torch.where(speed > 0.05, cos, torch.ones_like(cos))
+
+
+def goal_proximity(env: TraversalEnv) -> torch.Tensor:
+    return torch.exp(-env.goal_distance / 0.3)
+
+
+def alive(env: TraversalEnv) -> torch.Tensor:
+    return torch.ones(env.num_envs, device=env.device)
+
+
+def orientation(env: TraversalEnv) -> torch.Tensor:
+    return env.state.gravity[:, :2].square().sum(dim=-1)
+
+
+def lin_vel_z(env: TraversalEnv) -> torch.Tensor:
+    return env.state.root_lin_vel[:, 2].square()
+
+
+def ang_vel_xy(env: TraversalEnv) -> torch.Tensor:
+    return env.state.gyro[:, :2].square().sum(dim=-1)
+
+
+def action_rate(env: TraversalEnv) -> torch.Tensor:
+    return (env.actions - env.prev_actions).square().sum(dim=-1)
+
+
+def torques(env: TraversalEnv) -> torch.Tensor:
+    """PD torque estimate kp (q* - q) - kd qdot on the policy joints."""
+    ids = env.policy_ids
+    tau = (
+        env.kp[:, ids] * (env.targets[:, ids] - env.state.joint_pos[:, ids])
+        - env.kd[:, ids] * env.state.joint_vel[:, ids]
+    )
+    return tau.square().sum(dim=-1)
+
+
+def joint_limits(env: TraversalEnv) -> torch.Tensor:
+    q = env.state.joint_pos
+    return ((env.soft_lower - q).clamp_min(0) + (q - env.soft_upper).clamp_min(0)).sum(dim=-1)
+
+
+def _stance(env: TraversalEnv) -> torch.Tensor:
+    """Phase-defined stance of (left, right) feet: left stands in the first half period."""
+    s = torch.sin(2 * torch.pi * env.phase)
+    standing = env.command_vel.norm(dim=-1) < 0.05
+    left, right = s >= 0, s < 0
+    stance = torch.stack((left, right), dim=-1)
+    return stance | standing[:, None]
+
+
+def feet_phase_contact(env: TraversalEnv) -> torch.Tensor:
+    """+1 per foot whose floor contact matches the gait clock."""
+    return (env.state.foot_contact == _stance(env)).float().sum(dim=-1)
+
+
+def feet_clearance(env: TraversalEnv) -> torch.Tensor:
+    """Swing feet should lift to 7 cm (weighted by their horizontal speed)."""
+    swing = ~_stance(env)
+    z = env.state.foot_pos[..., 2]
+    speed = env.state.foot_vel[..., :2].norm(dim=-1)
+    return ((z - 0.07).square() * speed * swing).sum(dim=-1)
+
+
+def feet_slip(env: TraversalEnv) -> torch.Tensor:
+    return (env.state.foot_vel[..., :2].square().sum(dim=-1) * env.state.foot_contact).sum(dim=-1)
+
+
+def knee_straight(env: TraversalEnv) -> torch.Tensor:
+    """Penalise nearly straight knees (locked knees make stepping brittle)."""
+    knees = env.state.joint_pos[:, env.knee_ids]
+    return (0.2 - knees).clamp_min(0).sum(dim=-1)
+
+
+def sdf_barrier(env: TraversalEnv) -> torch.Tensor:
+    """Soft barrier on the signed distance at the query links: sum_k softplus((0.05 - d_k) / 0.02)."""
+    return F.softplus((0.05 - env.field.sdf) / 0.02).sum(dim=-1)
+
+
+def collision(env: TraversalEnv) -> torch.Tensor:
+    return env.state.collision.float()
+
+
+def termination(env: TraversalEnv) -> torch.Tensor:
+    """1 on a failure termination (not a timeout)."""
+    return env.failed.float()

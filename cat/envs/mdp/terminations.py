@@ -1,0 +1,28 @@
+"""Termination terms: boolean (N,) tensors; any true ends the episode as a failure."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import torch
+
+if TYPE_CHECKING:
+    from cat.envs.traversal_env import TraversalEnv
+
+
+def fallen(env: TraversalEnv) -> torch.Tensor:
+    t = env.cfg.terminations
+    low = env.state.root_pos[:, 2] < t.min_base_height
+    tilted = env.state.gravity[:, :2].norm(dim=-1) > t.max_tilt
+    return low | tilted
+
+
+def collided(env: TraversalEnv) -> torch.Tensor:
+    if not env.cfg.terminations.on_collision:
+        return torch.zeros(env.num_envs, dtype=torch.bool, device=env.device)
+    return env.state.collision
+
+
+def non_finite(env: TraversalEnv) -> torch.Tensor:
+    """Diverged physics (NaN/inf state) ends the episode instead of poisoning the batch."""
+    return ~torch.isfinite(env.state.root_pos).all(dim=-1)

@@ -1,0 +1,392 @@
+"""G1 goal-reaching / traversal env implementing rsl_rl's VecEnv (auto-reset inside ``step``).
+
+Observation groups: ``actor`` (deployable: IMU, joints, actions, goal, gait clock, HumanoidPF block) and
+``critic`` (actor terms without noise + privileged state). Terms are the plain functions of
+``cat.envs.mdp``; which ones are used is listed in ``ACTOR_TERMS`` / ``CRITIC_TERMS`` / ``RewardCfg``.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import asdict, dataclass, fields
+
+import torch
+from rsl_rl.env import VecEnv
+from tensordict import TensorDict
+
+from cat.envs import field_source as fsrc
+from cat.envs._pf_compat import FieldCfg, humanoid_pf
+from cat.envs.config import EnvCfg
+from cat.envs.math_utils import quat_rotate_inverse, rotate_yaw_inverse, yaw_from_quat, yaw_quat
+from cat.envs.mdp import observations as obs_terms
+from cat.envs.mdp import rewards as rew_terms
+from cat.envs.mdp import terminations as term_terms
+from cat.envs.robot import RobotCfg, home_qpos, load_robot_cfg
+from cat.envs.scene import (
+    COLLISION_SENSOR,
+    build_env_model,
+    foot_contact_sensor,
+    query_pos_sensor,
+    query_vel_sensor,
+)
+from cat.envs.sim import make_backend
+
+log = logging.getLogger(__name__)
+
+# (term, noise attribute of NoiseCfg or None)
+ACTOR_TERMS = [
+    ("gyro", "gyro"),
+    ("projected_gravity", "gravity"),
+    ("joint_pos", "joint_pos"),
+    ("joint_vel", "joint_vel"),
+    ("last_action", None),
+    ("leg_targets", None),
+    ("goal_command", None),
+    ("gait_phase", None),
+    ("field_block", "field"),
+]
+PRIVILEGED_TERMS = ["base_lin_vel", "base_height", "link_positions", "foot_contacts", "dr_scales"]
+TERMINATIONS = ["fallen", "collided", "non_finite"]
+
+
+@dataclass
+class SimState:
+    """Per-step robot state in float32 (world frame unless noted)."""
+
+    root_pos: torch.Tensor
+    root_quat: torch.Tensor
+    root_lin_vel: torch.Tensor
+    yaw: torch.Tensor
+    gyro: torch.Tensor  # pelvis frame
+    gravity: torch.Tensor  # pelvis frame
+    joint_pos: torch.Tensor
+    joint_vel: torch.Tensor
+    link_pos: torch.Tensor  # (N, 13, 3) query links
+    link_vel: torch.Tensor
+    foot_pos: torch.Tensor  # (N, 2, 3)
+    foot_vel: torch.Tensor
+    foot_contact: torch.Tensor  # (N, 2) bool
+    collision: torch.Tensor  # (N,) bool
+
+
+class TraversalEnv(VecEnv):
+    """N G1 robots walking to goals through (optionally) obstacle scenes, guided by HumanoidPF."""
+
+    def __init__(
+        self,
+        cfg: EnvCfg,
+        sim: str = "mujoco",
+        device: str = "cpu",
+        robot: RobotCfg | None = None,
+        field_cfg: FieldCfg | None = None,
+        scenes=None,
+        seed: int = 0,
+    ):
+        self.cfg = cfg
+        self.robot = robot or load_robot_cfg()
+        self.field_cfg = field_cfg or FieldCfg()
+        self.num_envs = cfg.num_envs
+        self.num_actions = len(self.robot.policy_joints)
+        self.dt = self.robot.control_dt
+        self.max_episode_length = int(math.ceil(cfg.episode_length_s / self.dt))
+        self.generator = torch.Generator(device="cpu").manual_seed(seed)
+        self.scenes = scenes
+
+        model = build_env_model(self.robot, scenes.add_to_spec if scenes is not None else None)
+        self.sim = make_backend(sim, model, self.num_envs, self.robot.decimation, device=device)
+        self.device = self.sim.device
+        self.field = None
+        self.field_source = (
+            scenes.field_source(self.device)
+            if scenes is not None
+            else fsrc.GoalField(eta=self.field_cfg.eta, free_sdf=cfg.field_obs.sdf_clip)
+        )
+        self._init_buffers(model)
+        self.reset_idx(torch.arange(self.num_envs, device=self.device))
+        self._compute_obs()
+
+    # --- setup -------------------------------------------------------------------------------------------
+    def _init_buffers(self, model) -> None:
+        n, dev, r = self.num_envs, self.device, self.robot
+        f32 = dict(device=dev, dtype=torch.float32)
+        self.default_joint_pos = torch.tensor(r.default_joint_pos, **f32).repeat(n, 1)
+        self.policy_ids = torch.tensor(r.policy_joint_ids, device=dev)
+        self.knee_ids = torch.tensor(
+            [r.joint_names.index(j) for j in r.joint_names if "knee" in j], device=dev
+        )
+        rng = torch.tensor(model.jnt_range[1:], **f32)  # skip the free joint
+        mid, half = rng.mean(dim=-1), 0.5 * (rng[:, 1] - rng[:, 0]) * r.soft_limit_factor
+        self.soft_lower, self.soft_upper = mid - half, mid + half
+        self.kp = torch.tensor(r.kp, **f32).repeat(n, 1)
+        self.kd = torch.tensor(r.kd, **f32).repeat(n, 1)
+        self.dr_scales = torch.ones(n, 3, **f32)
+        self.targets = self.default_joint_pos.clone()
+        self.actions = torch.zeros(n, self.num_actions, **f32)
+        self.prev_actions = torch.zeros_like(self.actions)
+        self.goals = torch.zeros(n, 3, **f32)
+        self.phase = torch.zeros(n, **f32)
+        self.gait_freq = torch.ones(n, **f32)
+        self.episode_length_buf = torch.zeros(n, dtype=torch.long, device=dev)
+        self.common_step = 0
+        self.push_timer = torch.zeros(n, **f32)
+        self.failed = torch.zeros(n, dtype=torch.bool, device=dev)
+        self.reached_time = torch.full((n,), float("inf"), **f32)
+        self.collided_ever = torch.zeros(n, dtype=torch.bool, device=dev)
+        self.min_goal_dist = torch.zeros(n, **f32)
+        self.kappa_max = self.field_cfg.kappa_max
+        k = len(r.query_links)
+        self.w0 = torch.full((k,), 0.5, **f32)
+        self.w0[0] = 1.0  # the root (pelvis) has priority (paper eq. w0); query_links[0] is the pelvis
+        self.field_obs_buf = torch.zeros(n, k, 7, **f32)
+        self.field_refresh = max(1, round(1.0 / (self.cfg.field_obs.refresh_hz * self.dt)))
+        self.reward_names = [
+            f.name for f in fields(self.cfg.rewards) if getattr(self.cfg.rewards, f.name) != 0.0
+        ]
+        self.episode_sums = {name: torch.zeros(n, **f32) for name in self.reward_names}
+        names = r.query_site_names
+        self._foot_link = [names.index("query_left_foot"), names.index("query_right_foot")]
+        self._has_collision_sensor = COLLISION_SENSOR in self.sim.sensors
+        self._update_state()
+
+    # --- state -------------------------------------------------------------------------------------------
+    def _update_state(self) -> None:
+        s, r = self.sim, self.robot
+        qpos, qvel = s.qpos.to(torch.float32), s.qvel.to(torch.float32)
+        quat = qpos[:, 3:7]
+        names = [q.name for q in r.query_links]
+        link_pos = torch.stack([s.sensor(query_pos_sensor(nm)) for nm in names], dim=1).to(torch.float32)
+        link_vel = torch.stack([s.sensor(query_vel_sensor(nm)) for nm in names], dim=1).to(torch.float32)
+        contact = torch.cat([s.sensor(foot_contact_sensor(f)) for f in r.feet], dim=-1) > 0
+        collision = (
+            s.sensor(COLLISION_SENSOR)[:, 0] > 0
+            if self._has_collision_sensor
+            else torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
+        )
+        gravity = quat_rotate_inverse(
+            quat, torch.tensor([0.0, 0.0, -1.0], device=self.device).expand(len(quat), 3)
+        )
+        self.state = SimState(
+            root_pos=qpos[:, :3],
+            root_quat=quat,
+            root_lin_vel=qvel[:, :3],
+            yaw=yaw_from_quat(quat),
+            gyro=s.sensor("gyro_pelvis").to(torch.float32),
+            gravity=gravity,
+            joint_pos=qpos[:, 7:],
+            joint_vel=qvel[:, 6:],
+            link_pos=link_pos,
+            link_vel=link_vel,
+            foot_pos=link_pos[:, self._foot_link],
+            foot_vel=link_vel[:, self._foot_link],
+            foot_contact=contact,
+            collision=collision,
+        )
+
+    def _update_field(self) -> None:
+        """Field at the links now (for rewards) and the command velocity from F_H at the root."""
+        st = self.state
+        self.field = self.field_source.sample(st.link_pos, self.goals)
+        self.humanoid_pf = humanoid_pf(
+            self.field.force, self.field.grad_sdf, self.field.sdf, st.link_vel, self.w0, self.field_cfg.lam
+        )
+        self.goal_distance = (self.goals[:, :2] - st.root_pos[:, :2]).norm(dim=-1)
+        root_dir = self.humanoid_pf[:, 0, :2]
+        root_dir = root_dir / root_dir.norm(dim=-1, keepdim=True).clamp_min(1e-6)
+        c = self.cfg.command
+        speed = c.speed * torch.clamp(self.goal_distance / c.slow_radius, max=1.0) ** 3
+        self.command_vel = root_dir * speed[:, None]
+
+    def _refresh_field_obs(self, env_ids: torch.Tensor | None = None) -> None:
+        if not self.cfg.field_obs.enabled:
+            return
+        ids = slice(None) if env_ids is None else env_ids
+        yaw = self.state.yaw[ids]
+        clip = self.cfg.field_obs.sdf_clip
+        fh = rotate_yaw_inverse(yaw, self.humanoid_pf[ids])
+        grad = rotate_yaw_inverse(yaw, self.field.grad_sdf[ids])
+        sdf = self.field.sdf[ids].clamp(-clip, clip).unsqueeze(-1)
+        self.field_obs_buf[ids] = torch.cat((fh, grad, sdf), dim=-1)
+
+    # --- VecEnv ------------------------------------------------------------------------------------------
+    def get_observations(self) -> TensorDict:
+        return self.obs_buf
+
+    def step(self, actions: torch.Tensor):
+        cfg = self.cfg
+        self.prev_actions = self.actions
+        self.actions = actions.to(self.device, torch.float32).clamp(-cfg.action_clip, cfg.action_clip)
+        ids = self.policy_ids
+        tgt = self.targets[:, ids] + self.robot.action_scale * self.actions
+        self.targets[:, ids] = torch.maximum(torch.minimum(tgt, self.soft_upper[ids]), self.soft_lower[ids])
+        self.sim.step(self.targets)
+
+        self.episode_length_buf += 1
+        self.phase = torch.remainder(self.phase + self.gait_freq * self.dt, 1.0)
+        self._update_state()
+        self._update_field()
+        self.common_step += 1
+        if self.common_step % self.field_refresh == 0:
+            self._refresh_field_obs()
+
+        # terminations
+        self.failed = torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
+        for name in TERMINATIONS:
+            self.failed |= getattr(term_terms, name)(self)
+        time_outs = self.episode_length_buf >= self.max_episode_length
+        dones = self.failed | time_outs
+
+        # rewards
+        reward = torch.zeros(self.num_envs, device=self.device)
+        for name in self.reward_names:
+            value = getattr(rew_terms, name)(self) * getattr(cfg.rewards, name)
+            value = torch.nan_to_num(value, nan=0.0, posinf=0.0, neginf=0.0)
+            self.episode_sums[name] += value
+            reward += value
+        self._track_success()
+
+        extras = {"time_outs": time_outs, "log": {}}
+        done_ids = dones.nonzero(as_tuple=False).flatten()
+        if len(done_ids) > 0:
+            extras["log"] = self._episode_log(done_ids)
+            extras["episode_end"] = {
+                "env_ids": done_ids,
+                "success": self.episode_success(done_ids),
+                "distance_error": self.min_goal_dist[done_ids].clone(),
+                "collided": self.collided_ever[done_ids].clone(),
+                "fell": self.failed[done_ids].clone(),
+            }
+            self.reset_idx(done_ids)
+        self._apply_pushes()
+        self._compute_obs()
+        return self.obs_buf, reward, dones.to(torch.long), extras
+
+    # --- episode bookkeeping -----------------------------------------------------------------------------
+    def _track_success(self) -> None:
+        t = self.episode_length_buf.to(torch.float32) * self.dt
+        self.collided_ever |= self.state.collision
+        reached = (self.goal_distance < self.cfg.success.radius) & torch.isinf(self.reached_time)
+        self.reached_time = torch.where(reached, t, self.reached_time)
+        self.min_goal_dist = torch.minimum(self.min_goal_dist, self.goal_distance)
+
+    def episode_success(self, env_ids: torch.Tensor) -> torch.Tensor:
+        """Paper's success: reached within ``success.radius`` by ``success.time_s`` and never collided."""
+        ok = self.reached_time[env_ids] <= self.cfg.success.time_s + 1e-6
+        return ok & ~self.collided_ever[env_ids]
+
+    def _episode_log(self, ids: torch.Tensor) -> dict:
+        length_s = (self.episode_length_buf[ids].to(torch.float32) * self.dt).clamp_min(self.dt)
+        out = {f"Episode_Reward/{k}": (v[ids] / length_s).mean() for k, v in self.episode_sums.items()}
+        out["Metrics/success_rate"] = self.episode_success(ids).float().mean()
+        out["Metrics/reached_rate"] = torch.isfinite(self.reached_time[ids]).float().mean()
+        out["Metrics/distance_error"] = self.min_goal_dist[ids].mean()
+        out["Metrics/collision_rate"] = self.collided_ever[ids].float().mean()
+        out["Metrics/fall_rate"] = self.failed[ids].float().mean()
+        return out
+
+    # --- resets ------------------------------------------------------------------------------------------
+    def reset_idx(self, env_ids: torch.Tensor) -> None:
+        k = len(env_ids)
+        if k == 0:
+            return
+        g, dev = self.generator, self.device
+        c = self.cfg.command
+
+        def uniform(lo, hi, *shape):
+            return (lo + (hi - lo) * torch.rand(*shape, generator=g)).to(dev)
+
+        if self.scenes is not None:
+            start, goal, heading = self.scenes.sample_episode(env_ids, g)
+            start, goal, heading = start.to(dev), goal.to(dev), heading.to(dev)
+        else:
+            start = torch.zeros(k, 3, device=dev)
+            start[:, :2] = uniform(-c.start_xy_range, c.start_xy_range, k, 2)
+            heading = uniform(-math.pi, math.pi, k)
+            radius = uniform(c.goal_radius[0], c.goal_radius[1], k)
+            goal = start + torch.stack(
+                (radius * heading.cos(), radius * heading.sin(), torch.zeros_like(radius)), -1
+            )
+            goal[:, 2] = c.goal_height
+        yaw = heading + uniform(-c.start_yaw_range, c.start_yaw_range, k)
+        qpos = torch.tensor(home_qpos(self.robot), device=dev, dtype=torch.float64).repeat(k, 1)
+        qpos[:, :2] = start[:, :2].double()
+        qpos[:, 3:7] = yaw_quat(yaw).double()
+        qpos[:, 7:] += uniform(-0.05, 0.05, k, self.robot.num_joints).double()
+        qvel = torch.zeros(k, self.sim.model.nv, device=dev, dtype=torch.float64)
+        if self.cfg.domain_rand.enabled:
+            self._randomise(env_ids)
+        self.sim.reset(env_ids, qpos, qvel)
+
+        self.goals[env_ids] = goal.to(torch.float32)
+        self.targets[env_ids] = self.default_joint_pos[env_ids]
+        self.actions[env_ids] = 0.0
+        self.prev_actions[env_ids] = 0.0
+        self.phase[env_ids] = uniform(0.0, 1.0, k)
+        self.gait_freq[env_ids] = uniform(*self.cfg.gait_freq, k)
+        self.episode_length_buf[env_ids] = 0
+        self.push_timer[env_ids] = uniform(*self.cfg.push.interval_s, k)
+        self.reached_time[env_ids] = float("inf")
+        self.collided_ever[env_ids] = False
+        self.min_goal_dist[env_ids] = float("inf")
+        for v in self.episode_sums.values():
+            v[env_ids] = 0.0
+        if self.scenes is not None:
+            self.field_source.assign(env_ids, self.scenes.field_ids(env_ids))
+        self._update_state()
+        self._update_field()
+        self.min_goal_dist[env_ids] = self.goal_distance[env_ids]
+        self._refresh_field_obs(env_ids)
+
+    def _randomise(self, env_ids: torch.Tensor) -> None:
+        dr, k, g = self.cfg.domain_rand, len(env_ids), self.generator
+
+        def u(rng, *shape):
+            return rng[0] + (rng[1] - rng[0]) * torch.rand(*shape, generator=g)
+
+        kp_s, kd_s, m_s = u(dr.kp_scale, k, 1), u(dr.kd_scale, k, 1), u(dr.mass_scale, k, 1)
+        base_kp, base_kd = torch.tensor(self.robot.kp), torch.tensor(self.robot.kd)
+        self.sim.set_actuator_gains(env_ids, base_kp * kp_s, base_kd * kd_s)
+        self.sim.set_body_mass_scale(env_ids, m_s.expand(k, self.sim.model.nbody))
+        self.kp[env_ids] = (base_kp * kp_s).to(self.device, torch.float32)
+        self.kd[env_ids] = (base_kd * kd_s).to(self.device, torch.float32)
+        self.dr_scales[env_ids] = torch.cat((kp_s, kd_s, m_s), dim=-1).to(self.device, torch.float32)
+
+    def _apply_pushes(self) -> None:
+        p = self.cfg.push
+        if not p.enabled:
+            return
+        self.push_timer -= self.dt
+        ids = (self.push_timer <= 0).nonzero(as_tuple=False).flatten()
+        if len(ids) == 0:
+            return
+        k, g = len(ids), self.generator
+        angle = 2 * math.pi * torch.rand(k, generator=g)
+        speed = p.speed[0] + (p.speed[1] - p.speed[0]) * torch.rand(k, generator=g)
+        qpos, qvel = self.sim.qpos[ids].clone(), self.sim.qvel[ids].clone()
+        qvel[:, 0] += (speed * angle.cos()).to(qvel)
+        qvel[:, 1] += (speed * angle.sin()).to(qvel)
+        self.sim.reset(ids, qpos, qvel)
+        self.push_timer[ids] = (
+            p.interval_s[0] + (p.interval_s[1] - p.interval_s[0]) * torch.rand(k, generator=g)
+        ).to(self.device)
+
+    # --- observations ------------------------------------------------------------------------------------
+    def _compute_obs(self) -> None:
+        noise = self.cfg.noise
+        actor, clean = [], []
+        for name, noise_key in ACTOR_TERMS:
+            value = getattr(obs_terms, name)(self)
+            clean.append(value)
+            if noise.enabled and noise_key is not None and getattr(noise, noise_key) > 0:
+                scale = getattr(noise, noise_key)
+                value = value + scale * (2 * torch.rand(value.shape, device=self.device) - 1)
+            actor.append(value)
+        critic = clean + [getattr(obs_terms, name)(self) for name in PRIVILEGED_TERMS]
+        self.obs_buf = TensorDict(
+            {"actor": torch.cat(actor, dim=-1), "critic": torch.cat(critic, dim=-1)},
+            batch_size=[self.num_envs],
+            device=self.device,
+        )
+
+    def cfg_dict(self) -> dict:
+        return asdict(self.cfg)

@@ -1,0 +1,1 @@
+"""Learning: run configs, rsl_rl runner set-up, rerun logging."""

@@ -1,0 +1,90 @@
+"""Top-level run configuration (hydra structured schema) and its conversion to rsl_rl's runner dict."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from cat.envs.config import EnvCfg
+
+
+@dataclass
+class SimCfg:
+    backend: str = "mujoco"  # mujoco | warp
+    device: str = "cpu"  # torch device of the env tensors (cuda:0 needs sim=warp)
+
+
+@dataclass
+class AlgoCfg:
+    """PPO (rsl_rl) settings; defaults follow the authors' release where known (DESIGN.md §5)."""
+
+    num_steps_per_env: int = 24
+    learning_rate: float = 3.0e-4
+    gamma: float = 0.97
+    lam: float = 0.95
+    num_learning_epochs: int = 5
+    num_mini_batches: int = 4
+    clip_param: float = 0.2
+    entropy_coef: float = 0.005
+    value_loss_coef: float = 1.0
+    max_grad_norm: float = 1.0
+    desired_kl: float = 0.01
+    schedule: str = "adaptive"
+    actor_hidden_dims: list[int] = field(default_factory=lambda: [256, 128, 64])
+    critic_hidden_dims: list[int] = field(default_factory=lambda: [512, 256, 128])
+    activation: str = "elu"
+    init_noise_std: float = 1.0
+    obs_normalization: bool = True
+    save_interval: int = 50
+
+
+@dataclass
+class TrainCfg:
+    task: EnvCfg = field(default_factory=EnvCfg)
+    sim: SimCfg = field(default_factory=SimCfg)
+    algo: AlgoCfg = field(default_factory=AlgoCfg)
+    num_envs: int | None = None  # overrides task.num_envs when set
+    max_iterations: int = 1500
+    seed: int = 0
+    init: str | None = None  # checkpoint whose policy/critic weights initialise this run
+    resume: str | None = None  # checkpoint to resume (optimizer + iteration), written to a new run folder
+    run_root: str = "runs"
+    run_name: str = ""
+
+
+def runner_cfg(algo: AlgoCfg) -> dict[str, Any]:
+    """rsl_rl 5.5 ``OnPolicyRunner`` config dict."""
+    return {
+        "num_steps_per_env": algo.num_steps_per_env,
+        "save_interval": algo.save_interval,
+        "check_for_nan": False,
+        "obs_groups": {"actor": ["actor"], "critic": ["critic"]},
+        "logger": {"class_name": "cat.learning.rerun_writer:RerunLogWriter"},
+        "algorithm": {
+            "class_name": "PPO",
+            "learning_rate": algo.learning_rate,
+            "gamma": algo.gamma,
+            "lam": algo.lam,
+            "num_learning_epochs": algo.num_learning_epochs,
+            "num_mini_batches": algo.num_mini_batches,
+            "clip_param": algo.clip_param,
+            "entropy_coef": algo.entropy_coef,
+            "value_loss_coef": algo.value_loss_coef,
+            "max_grad_norm": algo.max_grad_norm,
+            "desired_kl": algo.desired_kl,
+            "schedule": algo.schedule,
+        },
+        "actor": {
+            "class_name": "MLPModel",
+            "hidden_dims": list(algo.actor_hidden_dims),
+            "activation": algo.activation,
+            "obs_normalization": algo.obs_normalization,
+            "distribution_cfg": {"class_name": "GaussianDistribution", "init_std": algo.init_noise_std},
+        },
+        "critic": {
+            "class_name": "MLPModel",
+            "hidden_dims": list(algo.critic_hidden_dims),
+            "activation": algo.activation,
+            "obs_normalization": algo.obs_normalization,
+        },
+    }

@@ -1,0 +1,29 @@
+"""rsl_rl ``LogWriter`` that records training scalars to a rerun ``.rrd`` file in the run folder."""
+
+from __future__ import annotations
+
+import json
+import os
+
+import rerun as rr
+from rsl_rl.utils.log_writer import LogWriter
+
+
+class RerunLogWriter(LogWriter):
+    """Scalars go to ``<log_dir>/metrics.rrd`` on an ``iteration`` timeline (open with ``rerun metrics.rrd``)."""
+
+    def __init__(self, log_dir: str, recording_name: str = "cat_training", **_unused):
+        os.makedirs(log_dir, exist_ok=True)
+        self.path = os.path.join(log_dir, "metrics.rrd")
+        self.rec = rr.RecordingStream(recording_name)
+        self.rec.save(self.path)
+
+    def add_scalar(self, tag: str, scalar_value: float, global_step: int) -> None:
+        self.rec.set_time("iteration", sequence=int(global_step))
+        self.rec.log(tag, rr.Scalars(float(scalar_value)))
+
+    def store_config(self, env_cfg, train_cfg: dict) -> None:
+        self.rec.log("config", rr.TextDocument(json.dumps(train_cfg, indent=2, default=str)), static=True)
+
+    def stop(self) -> None:
+        self.rec.flush()

@@ -15,9 +15,7 @@ def main(argv: list[str]) -> int:
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     log = logging.getLogger("play")
     try:
-        cfg = OmegaConf.to_object(
-            OmegaConf.merge(OmegaConf.structured(PlayCfg), OmegaConf.from_dotlist(argv))
-        )
+        cfg = OmegaConf.to_object(OmegaConf.merge(OmegaConf.structured(PlayCfg), OmegaConf.from_dotlist(argv)))
     except Exception as err:
         valid = ", ".join(PlayCfg.__dataclass_fields__)
         log.error("bad arguments %s: %s (valid keys: %s)", argv, err, valid)

@@ -122,9 +122,7 @@ def menagerie_model_path(cfg: RobotCfg) -> Path:
         entry = next(e for e in robot.entry_points if e.name == cfg.model_entry)
         path = Path(robot.path()) / entry.file
     except StopIteration:
-        raise MenagerieModelError(
-            f"menagerie robot {cfg.model_name!r} has no entry {cfg.model_entry!r}"
-        ) from None
+        raise MenagerieModelError(f"menagerie robot {cfg.model_name!r} has no entry {cfg.model_entry!r}") from None
     except Exception as err:  # download or registry failure
         raise MenagerieModelError(
             f"could not load menagerie model {cfg.model_name!r} ({err}). Set MENAGERIE_ROOT to a local "

@@ -23,9 +23,7 @@ def foot_contact_sensor(foot_body: str) -> str:
     return f"floor_contact_{foot_body}"
 
 
-def build_env_model(
-    robot: RobotCfg, add_obstacles: Callable[[mujoco.MjSpec], None] | None = None
-) -> mujoco.MjModel:
+def build_env_model(robot: RobotCfg, add_obstacles: Callable[[mujoco.MjSpec], None] | None = None) -> mujoco.MjModel:
     """Compile G1 + floor, optionally obstacles (``add_obstacles(spec)``), plus env sensors.
 
     Sensors added (world frame): position and linear velocity of each query site, floor contact count per

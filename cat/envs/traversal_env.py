@@ -112,9 +112,7 @@ class TraversalEnv(VecEnv):
         f32 = dict(device=dev, dtype=torch.float32)
         self.default_joint_pos = torch.tensor(r.default_joint_pos, **f32).repeat(n, 1)
         self.policy_ids = torch.tensor(r.policy_joint_ids, device=dev)
-        self.knee_ids = torch.tensor(
-            [r.joint_names.index(j) for j in r.joint_names if "knee" in j], device=dev
-        )
+        self.knee_ids = torch.tensor([r.joint_names.index(j) for j in r.joint_names if "knee" in j], device=dev)
         rng = torch.tensor(model.jnt_range[1:], **f32)  # skip the free joint
         mid, half = rng.mean(dim=-1), 0.5 * (rng[:, 1] - rng[:, 0]) * r.soft_limit_factor
         self.soft_lower, self.soft_upper = mid - half, mid + half
@@ -140,9 +138,7 @@ class TraversalEnv(VecEnv):
         self.w0[0] = 1.0  # the root (pelvis) has priority (paper eq. w0); query_links[0] is the pelvis
         self.field_obs_buf = torch.zeros(n, k, 7, **f32)
         self.field_refresh = max(1, round(1.0 / (self.cfg.field_obs.refresh_hz * self.dt)))
-        self.reward_names = [
-            f.name for f in fields(self.cfg.rewards) if getattr(self.cfg.rewards, f.name) != 0.0
-        ]
+        self.reward_names = [f.name for f in fields(self.cfg.rewards) if getattr(self.cfg.rewards, f.name) != 0.0]
         self.episode_sums = {name: torch.zeros(n, **f32) for name in self.reward_names}
         names = r.query_site_names
         self._foot_link = [names.index("query_left_foot"), names.index("query_right_foot")]
@@ -163,9 +159,7 @@ class TraversalEnv(VecEnv):
             if self._has_collision_sensor
             else torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
         )
-        gravity = quat_rotate_inverse(
-            quat, torch.tensor([0.0, 0.0, -1.0], device=self.device).expand(len(quat), 3)
-        )
+        gravity = quat_rotate_inverse(quat, torch.tensor([0.0, 0.0, -1.0], device=self.device).expand(len(quat), 3))
         self.state = SimState(
             root_pos=qpos[:, :3],
             root_quat=quat,
@@ -303,9 +297,7 @@ class TraversalEnv(VecEnv):
             start[:, :2] = uniform(-c.start_xy_range, c.start_xy_range, k, 2)
             heading = uniform(-math.pi, math.pi, k)
             radius = uniform(c.goal_radius[0], c.goal_radius[1], k)
-            goal = start + torch.stack(
-                (radius * heading.cos(), radius * heading.sin(), torch.zeros_like(radius)), -1
-            )
+            goal = start + torch.stack((radius * heading.cos(), radius * heading.sin(), torch.zeros_like(radius)), -1)
             goal[:, 2] = c.goal_height
         yaw = heading + uniform(-c.start_yaw_range, c.start_yaw_range, k)
         qpos = torch.tensor(home_qpos(self.robot), device=dev, dtype=torch.float64).repeat(k, 1)
@@ -366,9 +358,9 @@ class TraversalEnv(VecEnv):
         qvel[:, 0] += (speed * angle.cos()).to(qvel)
         qvel[:, 1] += (speed * angle.sin()).to(qvel)
         self.sim.reset(ids, qpos, qvel)
-        self.push_timer[ids] = (
-            p.interval_s[0] + (p.interval_s[1] - p.interval_s[0]) * torch.rand(k, generator=g)
-        ).to(self.device)
+        self.push_timer[ids] = (p.interval_s[0] + (p.interval_s[1] - p.interval_s[0]) * torch.rand(k, generator=g)).to(
+            self.device
+        )
 
     # --- observations ------------------------------------------------------------------------------------
     def _compute_obs(self) -> None:

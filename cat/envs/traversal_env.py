@@ -142,38 +142,50 @@ class TraversalEnv(VecEnv):
         self.episode_sums = {name: torch.zeros(n, **f32) for name in self.reward_names}
         names = r.query_site_names
         self._foot_link = [names.index("query_left_foot"), names.index("query_right_foot")]
-        self._has_collision_sensor = COLLISION_SENSOR in self.sim.sensors
+        self._sensor_index()
         self._update_state()
 
     # --- state -------------------------------------------------------------------------------------------
-    def _update_state(self) -> None:
+    def _sensor_index(self) -> None:
+        """Column indices of the sensors the env reads, so one gather per step extracts them all."""
         s, r = self.sim, self.robot
-        qpos, qvel = s.qpos.to(torch.float32), s.qvel.to(torch.float32)
-        quat = qpos[:, 3:7]
+
+        def cols(name: str) -> list[int]:
+            sl = s.sensors[name]
+            return list(range(sl.adr, sl.adr + sl.dim))
+
         names = [q.name for q in r.query_links]
-        link_pos = torch.stack([s.sensor(query_pos_sensor(nm)) for nm in names], dim=1).to(torch.float32)
-        link_vel = torch.stack([s.sensor(query_vel_sensor(nm)) for nm in names], dim=1).to(torch.float32)
-        contact = torch.cat([s.sensor(foot_contact_sensor(f)) for f in r.feet], dim=-1) > 0
-        collision = (
-            s.sensor(COLLISION_SENSOR)[:, 0] > 0
-            if self._has_collision_sensor
-            else torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
-        )
-        gravity = quat_rotate_inverse(quat, torch.tensor([0.0, 0.0, -1.0], device=self.device).expand(len(quat), 3))
+        self._i_link_pos = torch.tensor([cols(query_pos_sensor(nm)) for nm in names], device=self.device)
+        self._i_link_vel = torch.tensor([cols(query_vel_sensor(nm)) for nm in names], device=self.device)
+        self._i_gyro = torch.tensor(cols("gyro_pelvis"), device=self.device)
+        self._i_feet = torch.tensor([cols(foot_contact_sensor(f))[0] for f in r.feet], device=self.device)
+        self._i_collision = cols(COLLISION_SENSOR)[0] if COLLISION_SENSOR in s.sensors else None
+        self._down = torch.tensor([0.0, 0.0, -1.0], device=self.device)
+
+    def _update_state(self) -> None:
+        s = self.sim
+        qpos, qvel = s.qpos.to(torch.float32), s.qvel.to(torch.float32)
+        sens = s.sensordata.to(torch.float32)
+        quat = qpos[:, 3:7]
+        link_pos, link_vel = sens[:, self._i_link_pos], sens[:, self._i_link_vel]
+        if self._i_collision is None:
+            collision = torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
+        else:
+            collision = sens[:, self._i_collision] > 0
         self.state = SimState(
             root_pos=qpos[:, :3],
             root_quat=quat,
             root_lin_vel=qvel[:, :3],
             yaw=yaw_from_quat(quat),
-            gyro=s.sensor("gyro_pelvis").to(torch.float32),
-            gravity=gravity,
+            gyro=sens[:, self._i_gyro],
+            gravity=quat_rotate_inverse(quat, self._down.expand(len(quat), 3)),
             joint_pos=qpos[:, 7:],
             joint_vel=qvel[:, 6:],
             link_pos=link_pos,
             link_vel=link_vel,
             foot_pos=link_pos[:, self._foot_link],
             foot_vel=link_vel[:, self._foot_link],
-            foot_contact=contact,
+            foot_contact=sens[:, self._i_feet] > 0,
             collision=collision,
         )
 

@@ -1,0 +1,25 @@
+"""Benchmarks: ``python scripts/bench.py sim`` | ``python scripts/bench.py fields`` (extra args pass through)."""
+
+from __future__ import annotations
+
+import importlib
+import sys
+
+COMMANDS = {"sim": "cat.envs.bench", "fields": "cat.fields.bench"}
+
+
+def main(argv: list[str]) -> int:
+    if not argv or argv[0] not in COMMANDS:
+        print(f"usage: bench.py {{{'|'.join(COMMANDS)}}} [args]", file=sys.stderr)
+        return 2
+    try:
+        module = importlib.import_module(COMMANDS[argv[0]])
+    except ImportError as err:
+        print(f"benchmark {argv[0]!r} unavailable: {err}", file=sys.stderr)
+        return 2
+    module.main(argv[1:])
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

@@ -13,6 +13,7 @@ import yaml
 from omegaconf import OmegaConf
 from rsl_rl.runners import OnPolicyRunner
 
+from cat.envs.sim import BACKENDS
 from cat.envs.traversal_env import TraversalEnv
 from cat.learning.config import TrainCfg, runner_cfg
 
@@ -62,6 +63,8 @@ def load_run_config(checkpoint: str | os.PathLike) -> TrainCfg:
 def train(cfg: TrainCfg) -> Path:
     """Train PPO per ``cfg``; returns the run folder (config.yaml, model_*.pt, metrics.rrd)."""
     torch.manual_seed(cfg.seed)
+    if cfg.sim.backend not in BACKENDS:
+        raise ValueError(f"unknown sim backend {cfg.sim.backend!r}; valid: {', '.join(BACKENDS)}")
     for path in (cfg.init, cfg.resume):
         if path and not Path(path).is_file():
             raise CheckpointError(f"checkpoint not found: {path}")

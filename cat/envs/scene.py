@@ -23,13 +23,20 @@ def foot_contact_sensor(foot_body: str) -> str:
     return f"floor_contact_{foot_body}"
 
 
-def build_env_model(robot: RobotCfg, add_obstacles: Callable[[mujoco.MjSpec], None] | None = None) -> mujoco.MjModel:
+def build_env_model(
+    robot: RobotCfg, add_obstacles: Callable[[mujoco.MjSpec], None] | None = None, visual_meshes: bool = False
+) -> mujoco.MjModel:
     """Compile G1 + floor, optionally obstacles (``add_obstacles(spec)``), plus env sensors.
+
+    The robot's visual meshes (200k vertices, no collision role, inertias are explicit) are dropped unless
+    ``visual_meshes``: they make per-world model copies (domain randomisation) 500x slower.
 
     Sensors added (world frame): position and linear velocity of each query site, floor contact count per
     foot, and (when the spec has an ``obstacles`` body) the number of robot-obstacle contacts.
     """
     spec = robot_spec(robot)
+    if not visual_meshes:
+        strip_visual_meshes(spec)
     if add_obstacles is not None:
         add_obstacles(spec)
     for site in robot.query_site_names:
@@ -68,3 +75,18 @@ def build_env_model(robot: RobotCfg, add_obstacles: Callable[[mujoco.MjSpec], No
             intprm=found,
         )
     return compile_model(spec)
+
+
+def strip_visual_meshes(spec: mujoco.MjSpec) -> None:
+    """Delete the robot's mesh geoms (visual only: contype = conaffinity = 0) and their mesh assets."""
+    used = set()
+    for geom in list(spec.geoms):
+        if geom.type != mujoco.mjtGeom.mjGEOM_MESH:
+            continue
+        if geom.contype == 0 and geom.conaffinity == 0:
+            spec.delete(geom)
+        else:
+            used.add(geom.meshname)
+    for mesh in list(spec.meshes):
+        if mesh.name not in used:
+            spec.delete(mesh)

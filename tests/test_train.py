@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -33,6 +34,18 @@ def _train_and_play(tmp_path, sim: str):
 
 def test_train_save_reload_play_mujoco(tmp_path):
     ckpt = _train_and_play(tmp_path, "mujoco")
+    # a recorded rollout replays in rerun: robot shapes, goal and the F_H arrows at the 13 links
+    rrd = tmp_path / "rollout.rrd"
+    play(PlayCfg(checkpoint=str(ckpt), episodes=1, num_envs=1, record=str(rrd)))
+    printed = subprocess.run(
+        ["rerun", "rrd", "print", str(rrd)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={**os.environ, "RERUN_ANALYTICS": "0"},
+    ).stdout
+    for entity in ("world/robot/capsules", "world/goal", "world/field/F_H"):
+        assert entity in printed
     # resume continues the iteration count; init loads only weights
     resumed = train(_small(tmp_path, f"resume={ckpt}"))
     assert any(int(p.stem.split("_")[1]) > 1 for p in resumed.glob("model_*.pt"))

@@ -20,7 +20,7 @@ class PlayCfg:
     num_envs: int = 0  # 0 = min(episodes, 64)
     sim: str = ""  # override the run's backend
     seed: int = 1
-    record: str = ""  # .rrd path to record the rollout for rerun replay
+    record: str = ""  # .rrd path: record world 0 of the rollout for rerun replay (`rerun <file>`)
 
 
 @dataclass

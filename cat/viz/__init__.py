@@ -1,0 +1,1 @@
+"""Visualisation: rerun recordings of rollouts (robot, obstacles, goal, HumanoidPF arrows)."""

@@ -87,3 +87,14 @@ def test_domain_randomisation_and_pushes_change_physics():
     env.step(torch.zeros(4, 12))
     env.step(torch.zeros(4, 12))
     assert (env.sim.qvel[:, :2] - v0).norm(dim=-1).max() > 0.05
+
+
+def test_unknown_term_names_are_rejected():
+    cfg = EnvCfg(num_envs=2)
+    cfg.observations.actor.append("elevation_mapp")
+    with pytest.raises(ValueError, match="unknown observation term 'elevation_mapp'; valid: .*field_block"):
+        TraversalEnv(cfg)
+    cfg = EnvCfg(num_envs=2)
+    cfg.terminations.terms = ["fallen", "tripped"]
+    with pytest.raises(ValueError, match="unknown termination term 'tripped'"):
+        TraversalEnv(cfg)

@@ -27,15 +27,38 @@ class FieldObsCfg:
 
 
 @dataclass
+class ObsCfg:
+    """Observation terms (functions of ``cat.envs.mdp.observations``) per group, in order."""
+
+    actor: list[str] = field(
+        default_factory=lambda: [
+            "gyro",
+            "projected_gravity",
+            "joint_pos",
+            "joint_vel",
+            "last_action",
+            "leg_targets",
+            "goal_command",
+            "gait_phase",
+            "field_block",
+        ]
+    )
+    # the critic sees the actor terms without noise, plus these
+    privileged: list[str] = field(
+        default_factory=lambda: ["base_lin_vel", "base_height", "link_positions", "foot_contacts", "dr_scales"]
+    )
+
+
+@dataclass
 class NoiseCfg:
-    """Uniform observation noise U(-s, s) per actor term (zero disables)."""
+    """Uniform observation noise U(-s, s) per actor term, keyed by term name (zero or absent: no noise)."""
 
     enabled: bool = True
     gyro: float = 0.2
-    gravity: float = 0.05
+    projected_gravity: float = 0.05
     joint_pos: float = 0.01
     joint_vel: float = 1.5
-    field: float = 0.05
+    field_block: float = 0.05
 
 
 @dataclass
@@ -81,6 +104,7 @@ class RewardCfg:
 
 @dataclass
 class TerminationCfg:
+    terms: list[str] = field(default_factory=lambda: ["fallen", "collided", "non_finite"])
     min_base_height: float = 0.35  # [m]
     max_tilt: float = 1.0  # |projected gravity xy|, ~ sin of tilt
     on_collision: bool = False  # end the episode on any robot-obstacle contact
@@ -105,6 +129,7 @@ class EnvCfg:
     action_clip: float = 1.0
     gait_freq: tuple[float, float] = (1.3, 1.5)  # gait clock frequency [Hz]
     command: CommandCfg = field(default_factory=CommandCfg)
+    observations: ObsCfg = field(default_factory=ObsCfg)
     field_obs: FieldObsCfg = field(default_factory=FieldObsCfg)
     noise: NoiseCfg = field(default_factory=NoiseCfg)
     domain_rand: DomainRandCfg = field(default_factory=DomainRandCfg)

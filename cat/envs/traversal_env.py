@@ -2,7 +2,7 @@
 
 Observation groups: ``actor`` (deployable: IMU, joints, actions, goal, gait clock, HumanoidPF block) and
 ``critic`` (actor terms without noise + privileged state). Terms are the plain functions of
-``cat.envs.mdp``; which ones are used is listed in ``ACTOR_TERMS`` / ``CRITIC_TERMS`` / ``RewardCfg``.
+``cat.envs.mdp``, selected by name in ``EnvCfg.observations`` / ``.rewards`` (weights) / ``.terminations``.
 """
 
 from __future__ import annotations
@@ -33,21 +33,6 @@ from cat.envs.scene import (
 from cat.envs.sim import make_backend
 
 log = logging.getLogger(__name__)
-
-# (term, noise attribute of NoiseCfg or None)
-ACTOR_TERMS = [
-    ("gyro", "gyro"),
-    ("projected_gravity", "gravity"),
-    ("joint_pos", "joint_pos"),
-    ("joint_vel", "joint_vel"),
-    ("last_action", None),
-    ("leg_targets", None),
-    ("goal_command", None),
-    ("gait_phase", None),
-    ("field_block", "field"),
-]
-PRIVILEGED_TERMS = ["base_lin_vel", "base_height", "link_positions", "foot_contacts", "dr_scales"]
-TERMINATIONS = ["fallen", "collided", "non_finite"]
 
 
 @dataclass
@@ -139,6 +124,10 @@ class TraversalEnv(VecEnv):
         self.field_obs_buf = torch.zeros(n, k, 7, **f32)
         self.field_refresh = max(1, round(1.0 / (self.cfg.field_obs.refresh_hz * self.dt)))
         self.reward_names = [f.name for f in fields(self.cfg.rewards) if getattr(self.cfg.rewards, f.name) != 0.0]
+        obs_cfg = self.cfg.observations
+        self._obs_fns = {t: _term(obs_terms, t, "observation") for t in obs_cfg.actor + obs_cfg.privileged}
+        for t in self.cfg.terminations.terms:
+            _term(term_terms, t, "termination")
         self.episode_sums = {name: torch.zeros(n, **f32) for name in self.reward_names}
         names = r.query_site_names
         self._foot_link = [names.index("query_left_foot"), names.index("query_right_foot")]
@@ -237,7 +226,7 @@ class TraversalEnv(VecEnv):
 
         # terminations
         self.failed = torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
-        for name in TERMINATIONS:
+        for name in cfg.terminations.terms:
             self.failed |= getattr(term_terms, name)(self)
         time_outs = self.episode_length_buf >= self.max_episode_length
         dones = self.failed | time_outs
@@ -378,14 +367,14 @@ class TraversalEnv(VecEnv):
     def _compute_obs(self) -> None:
         noise = self.cfg.noise
         actor, clean = [], []
-        for name, noise_key in ACTOR_TERMS:
-            value = getattr(obs_terms, name)(self)
+        for name in self.cfg.observations.actor:
+            value = self._obs_fns[name](self)
             clean.append(value)
-            if noise.enabled and noise_key is not None and getattr(noise, noise_key) > 0:
-                scale = getattr(noise, noise_key)
+            scale = getattr(noise, name, 0.0)
+            if noise.enabled and scale > 0:
                 value = value + scale * (2 * torch.rand(value.shape, device=self.device) - 1)
             actor.append(value)
-        critic = clean + [getattr(obs_terms, name)(self) for name in PRIVILEGED_TERMS]
+        critic = clean + [self._obs_fns[name](self) for name in self.cfg.observations.privileged]
         self.obs_buf = TensorDict(
             {"actor": torch.cat(actor, dim=-1), "critic": torch.cat(critic, dim=-1)},
             batch_size=[self.num_envs],
@@ -394,3 +383,13 @@ class TraversalEnv(VecEnv):
 
     def cfg_dict(self) -> dict:
         return asdict(self.cfg)
+
+
+def _term(module, name: str, kind: str):
+    """Look up a term function by name, with an error listing the valid names."""
+    fn = getattr(module, name, None)
+    if fn is None or name.startswith("_") or not callable(fn):
+        valid = sorted(k for k, v in vars(module).items() if callable(v) and not k.startswith("_") and k[0].islower())
+        valid = [k for k in valid if getattr(getattr(module, k), "__module__", "") == module.__name__]
+        raise ValueError(f"unknown {kind} term {name!r}; valid: {', '.join(valid)}")
+    return fn

@@ -1,0 +1,169 @@
+"""The paper's eight typical scene types (Table I), parametric in a difficulty d ∈ [0, 1] and a seed.
+
+Every typical scene is 3.0 × 2.0 × 1.5 m, origin (−0.5, −1, 0), course along +x from the start (0, 0)
+to the goal (2, 0) at ``GOAL_HEIGHT``. Obstacles sit in x ∈ [0.4, 1.75] and span the whole width, so the
+robot must use the skill the type names. Building blocks (sizes from the released scenes, narrowed where
+needed for a G1 to physically pass):
+
+* hurdle bar: horizontal cylinder across the course, radius 0.08 → 0.15 m, top 0.08 → 0.25 m;
+* ceiling: slab from the top of the scene down to 1.15 → 1.00 m (G1 head ≈ 1.24 m standing);
+* slit wall: 0.12 m thick, full height, gap 0.90 → 0.32 m (0.25 m in the released scenes is below a
+  G1's ~0.2 m torso depth plus our 0.1 m body-radius margin);
+* corridor ("-pass" types): solid blocks from the sides leaving a channel 1.3 → 0.75 m wide.
+
+Arrows read easy → hard (d = 0 → 1). Positions, gaps and small per-variant jitter come from the seed;
+sizes grow monotonically with d for a fixed seed, so the free-volume fraction falls with d.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+import trimesh
+
+from cat.terrain.primitives import bar, box, combine, crop_parts
+from cat.terrain.scene import GOAL_HEIGHT, Scene, SceneError
+
+TYPICAL_KINDS = (
+    "hurdle-crouch",
+    "side-hurdle-crouch",
+    "side-hurdle",
+    "side-crouch",
+    "hurdle-pass",
+    "crouch-pass",
+    "side-pass",
+    "multi-hurdle",
+)
+BOUNDS = np.array([[-0.5, -1.0, 0.0], [2.5, 1.0, 1.5]])
+START = np.array([0.0, 0.0, GOAL_HEIGHT])
+GOAL = np.array([2.0, 0.0, GOAL_HEIGHT])
+START_REGION = np.array([[-0.3, -0.3], [0.1, 0.3]])
+COURSE = (0.4, 1.75)  # x range holding obstacles
+WALL_T = 0.12
+HEIGHT = float(BOUNDS[1, 2])
+HALF_W = float(BOUNDS[1, 1])
+
+
+def lerp(a: float, b: float, t: float) -> float:
+    return float(a + (b - a) * np.clip(t, 0.0, 1.0))
+
+
+class _Params:
+    """Difficulty-driven parameters with a small per-seed jitter (monotone in d for a fixed seed)."""
+
+    def __init__(self, d: float, rng: np.random.Generator):
+        self.d, self.rng = d, rng
+
+    def __call__(self, easy: float, hard: float, jitter: float = 0.1) -> float:
+        return lerp(easy, hard, self.d + self.rng.uniform(-jitter, jitter))
+
+
+# Each element is (x-extent, builder(x0) -> parts); builders close over their parameters.
+Element = tuple[float, Callable[[float], list[trimesh.Trimesh]]]
+
+
+def _bar(p: _Params) -> Element:
+    top, r = p(0.08, 0.25), p(0.08, 0.15)
+    return 2 * r, lambda x0: [bar("y", (x0 + r, 0.0, top - r), r, 2 * HALF_W)]
+
+
+def _ceiling(p: _Params, depth: tuple[float, float] = (0.3, 0.6)) -> Element:
+    bottom, dep = p(1.15, 1.00), p(*depth)
+    return dep, lambda x0: [box((x0, -HALF_W, bottom), (x0 + dep, HALF_W, HEIGHT))]
+
+
+def _slit_parts(x0: float, gap: float, yc: float) -> list[trimesh.Trimesh]:
+    lo, hi = yc - gap / 2, yc + gap / 2
+    return [box((x0, -HALF_W, 0.0), (x0 + WALL_T, lo, HEIGHT)), box((x0, hi, 0.0), (x0 + WALL_T, HALF_W, HEIGHT))]
+
+
+def _slit(p: _Params, yc: float | None = None) -> Element:
+    gap = p(0.90, 0.32, jitter=0.05)
+    if yc is None:
+        yc = p.rng.uniform(-1, 1) * (HALF_W - 0.15 - gap / 2) * 0.6
+    return WALL_T, lambda x0: _slit_parts(x0, gap, yc)
+
+
+def _low_door(p: _Params) -> Element:
+    """Slit wall whose gap is capped by a lintel, continued by a ceiling: side-step and crouch at once."""
+    gap, yc = p(0.90, 0.36, jitter=0.05), p.rng.uniform(-0.25, 0.25)
+    bottom, dep = p(1.15, 1.00), p(0.2, 0.5)
+
+    def build(x0: float) -> list[trimesh.Trimesh]:
+        return _slit_parts(x0, gap, yc) + [box((x0, -HALF_W, bottom), (x0 + WALL_T + dep, HALF_W, HEIGHT))]
+
+    return WALL_T + dep, build
+
+
+def _sequence(elements: list[Element], rng: np.random.Generator, min_gap: float = 0.25) -> list[trimesh.Trimesh]:
+    """Place elements along the course with random gaps (at least ``min_gap`` when they fit)."""
+    length = COURSE[1] - COURSE[0]
+    spare = length - sum(e for e, _ in elements)
+    n_gaps = len(elements) + 1
+    if spare < 0:
+        raise SceneError(f"typical elements need {length - spare:.2f} m of course, only {length:.2f} m")
+    inner = max(min(min_gap, spare / max(n_gaps - 2, 1)), 0.0) if len(elements) > 1 else 0.0
+    rest = spare - inner * (len(elements) - 1)
+    w = rng.dirichlet(np.ones(n_gaps))
+    gaps = rest * w
+    gaps[1:-1] += inner
+    parts, x = [], COURSE[0] + gaps[0]
+    for (ext, build), g in zip(elements, gaps[1:], strict=True):
+        parts += build(x)
+        x += ext + g
+    return parts
+
+
+def _corridor(p: _Params) -> list[trimesh.Trimesh]:
+    half = p(1.3, 0.75, jitter=0.05) / 2
+    x0, x1 = COURSE[0] - 0.05, COURSE[1] - 0.05
+    return [box((x0, -HALF_W, 0.0), (x1, -half, HEIGHT)), box((x0, half, 0.0), (x1, HALF_W, HEIGHT))]
+
+
+def _layout(kind: str, p: _Params) -> list[trimesh.Trimesh]:
+    rng = p.rng
+    if kind == "hurdle-crouch":
+        return _sequence([_bar(p), _ceiling(p)], rng)
+    if kind == "side-hurdle-crouch":
+        return _sequence([_slit(p), _bar(p), _ceiling(p, (0.25, 0.4))], rng)
+    if kind == "side-hurdle":
+        return _sequence([_slit(p), _bar(p)], rng)
+    if kind == "side-crouch":
+        return _sequence([_low_door(p)], rng)
+    if kind == "hurdle-pass":
+        return _corridor(p) + _sequence([_bar(p)], rng)
+    if kind == "crouch-pass":
+        return _corridor(p) + _sequence([_ceiling(p, (0.4, 0.9))], rng)
+    if kind == "side-pass":
+        off = p(0.2, 0.45) * rng.choice([-1.0, 1.0])
+        return _sequence([_slit(p, yc=off), _slit(p, yc=-off)], rng, min_gap=0.45)
+    if kind == "multi-hurdle":
+        n = 2 if p.d < 0.5 else 3
+        return _sequence([_bar(p) for _ in range(n)], rng, min_gap=0.3)
+    raise SceneError(f"unknown typical scene type {kind!r}; valid: {', '.join(TYPICAL_KINDS)}")
+
+
+def make_typical(kind: str, difficulty: float = 0.5, seed: int = 0) -> Scene:
+    """One typical scene of ``kind`` (see ``TYPICAL_KINDS``); deterministic in (kind, difficulty, seed)."""
+    if not 0.0 <= difficulty <= 1.0:
+        raise SceneError(f"difficulty must be in [0, 1], got {difficulty}")
+    rng = np.random.default_rng([seed, TYPICAL_KINDS.index(kind) if kind in TYPICAL_KINDS else 99])
+    parts = crop_parts(_layout(kind, _Params(difficulty, rng)), BOUNDS[0], BOUNDS[1])
+    return Scene(
+        mesh=combine(parts),
+        bounds=BOUNDS.copy(),
+        start=START.copy(),
+        goals=GOAL[None].copy(),
+        kind=kind,
+        difficulty=float(difficulty),
+        seed=int(seed),
+        start_region=START_REGION.copy(),
+        meta={"family": "typical", "primitive_parts": True},
+    )
+
+
+def typical_variants(kind: str, n: int = 10, seed: int = 0) -> list[Scene]:
+    """``n`` variants of ``kind`` with difficulties spread evenly over [0, 1] and seeds seed..seed+n-1."""
+    ds = np.linspace(0.0, 1.0, n) if n > 1 else np.array([0.5])
+    return [make_typical(kind, float(d), seed + i) for i, d in enumerate(ds)]

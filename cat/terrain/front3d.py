@@ -62,7 +62,8 @@ def load_front3d(
                 ref = child["ref"]
                 tf = _child_transform(child)
             except (KeyError, ValueError, TypeError) as err:
-                raise Front3DError(f"{path}: bad child {child.get('instanceid', '?')} in room {room.get('instanceid')} ({err!r})") from err
+                where = f"child {child.get('instanceid', '?')} in room {room.get('instanceid')}"
+                raise Front3DError(f"{path}: bad {where} ({err!r})") from err
             if ref in arch:
                 m = arch[ref]
                 kind = str(m.get("type", ""))

@@ -57,7 +57,8 @@ def chair(rng: np.random.Generator) -> Parts:
 
 def bed(rng: np.random.Generator) -> Parts:
     w, length = rng.choice([0.9, 1.4, 1.6, 1.8]), rng.uniform(1.95, 2.1)
-    return [box((-w / 2, -length / 2, 0.0), (w / 2, length / 2, 0.5)), box((-w / 2, -length / 2, 0.0), (w / 2, -length / 2 + 0.08, 1.0))]
+    base = box((-w / 2, -length / 2, 0.0), (w / 2, length / 2, 0.5))
+    return [base, box((-w / 2, -length / 2, 0.0), (w / 2, -length / 2 + 0.08, 1.0))]
 
 
 def sofa(rng: np.random.Generator) -> Parts:
@@ -82,12 +83,14 @@ def shelf(rng: np.random.Generator) -> Parts:
 
 def floor_lamp(rng: np.random.Generator) -> Parts:
     h = rng.uniform(1.5, 1.7)
-    return [vcylinder((0, 0), 0.15, 0.0, 0.03), vcylinder((0, 0), 0.015, 0.03, h - 0.25), vcylinder((0, 0), 0.2, h - 0.25, h)]
+    base, pole = vcylinder((0, 0), 0.15, 0.0, 0.03), vcylinder((0, 0), 0.015, 0.03, h - 0.25)
+    return [base, pole, vcylinder((0, 0), 0.2, h - 0.25, h)]
 
 
 def pendant_lamp(rng: np.random.Generator) -> Parts:
     bottom = rng.uniform(1.2, 1.5)
-    return [vcylinder((0, 0), rng.uniform(0.15, 0.3), bottom, bottom + 0.25), vcylinder((0, 0), 0.01, bottom + 0.25, WALL_H)]
+    shade = vcylinder((0, 0), rng.uniform(0.15, 0.3), bottom, bottom + 0.25)
+    return [shade, vcylinder((0, 0), 0.01, bottom + 0.25, WALL_H)]
 
 
 def wall_shelf(rng: np.random.Generator) -> Parts:
@@ -221,5 +224,6 @@ def make_house(rng: np.random.Generator, clutter_count: tuple[int, int] = (4, 10
             c = room.place(clutter(rng), rng, False, 0.1, tries=10)
             parts += c
             tags += ["furniture"] * len(c)
-    floor = trimesh.Trimesh([[0, 0, 0], [size[0], 0, 0], [size[0], size[1], 0], [0, size[1], 0]], [[0, 1, 2], [0, 2, 3]])
+    corners = [[0, 0, 0], [size[0], 0, 0], [size[0], size[1], 0], [0, size[1], 0]]
+    floor = trimesh.Trimesh(corners, [[0, 1, 2], [0, 2, 3]])
     return House(parts=parts, floor=floor, name="procedural_house", tags=tags)

@@ -4,8 +4,8 @@ As in the paper, all furniture is projected onto the ground and the floor minus 
 eroded by 0.1 m; the start is sampled there, a ``crop`` × ``crop`` block is cut around it (the scene is
 re-centred so the start is at the origin), and goals are candidates on a 2 m circle around the start,
 kept only when reachable through the crop (and on the house floor). An indoor crop's difficulty is
-measured, not chosen: the fraction of its floor a humanoid cannot stand on (clutter density). Houses come from the embedded
-procedural generator (``cat.terrain.furniture``) or from 3D-FRONT (``cat.terrain.front3d``).
+measured, not chosen: the fraction of its floor a humanoid cannot stand on (clutter density). Houses
+come from the embedded procedural generator (``cat.terrain.furniture``) or from 3D-FRONT (``cat.terrain.front3d``).
 
 Crops made only of closed convex parts keep them (exact MuJoCo parts, no coacd); crops that cut open
 non-closed meshes (3D-FRONT) are re-meshed from their occupancy by marching cubes to be watertight.

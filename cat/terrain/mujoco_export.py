@@ -78,7 +78,8 @@ def coacd_parts(mesh: trimesh.Trimesh, cfg: CoacdCfg | None = None, cache: Path 
     parts = [trimesh.Trimesh(np.asarray(v), np.asarray(f), process=False) for v, f in result]
     cache.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(".tmp.npz")
-    np.savez_compressed(tmp, **{f"v{i}": p.vertices for i, p in enumerate(parts)}, **{f"f{i}": p.faces for i, p in enumerate(parts)})
+    arrays = {f"v{i}": p.vertices for i, p in enumerate(parts)} | {f"f{i}": p.faces for i, p in enumerate(parts)}
+    np.savez_compressed(tmp, **arrays)
     tmp.replace(path)
     return parts
 

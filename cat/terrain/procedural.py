@@ -122,7 +122,9 @@ def _ball(r: int) -> np.ndarray:
     return (g**2).sum(0) <= r * r + 1e-9
 
 
-def procedural_occupancy(difficulty: float, rng: np.random.Generator, cfg: ProceduralCfg) -> tuple[np.ndarray, GridSpec]:
+def procedural_occupancy(
+    difficulty: float, rng: np.random.Generator, cfg: ProceduralCfg
+) -> tuple[np.ndarray, GridSpec]:
     """Occupancy of one procedural layout on its grid (start at the origin, keep-out carved)."""
     r = cfg.size / 2
     grid = GridSpec.from_bounds(np.array([[-r, -r, 0.0], [r, r, cfg.height]]), cfg.voxel)
@@ -159,7 +161,9 @@ def make_procedural(
             break
         log.info("procedural seed %d d=%.2f attempt %d: no reachable goal, redrawing", seed, difficulty, attempt)
     else:
-        raise SceneError(f"procedural seed {seed} difficulty {difficulty}: no reachable goal in {cfg.max_attempts} tries")
+        raise SceneError(
+            f"procedural seed {seed} difficulty {difficulty}: no reachable goal in {cfg.max_attempts} tries"
+        )
     r = cfg.size / 2
     scene = Scene(
         mesh=occupancy_to_mesh(occ, grid),

@@ -10,20 +10,29 @@ from rsl_rl.utils.log_writer import LogWriter
 
 
 class RerunLogWriter(LogWriter):
-    """Scalars go to ``<log_dir>/metrics.rrd`` on an ``iteration`` timeline (open with ``rerun metrics.rrd``)."""
+    """Scalars go to ``<log_dir>/metrics.rrd`` on an ``iteration`` timeline (open with ``rerun metrics.rrd``).
+
+    The same scalars are appended to ``metrics.csv`` (iteration, tag, value) for plotting without a viewer
+    (``scripts/plot_training.py``).
+    """
 
     def __init__(self, log_dir: str, recording_name: str = "cat_training", **_unused):
         os.makedirs(log_dir, exist_ok=True)
         self.path = os.path.join(log_dir, "metrics.rrd")
         self.rec = rr.RecordingStream(recording_name)
         self.rec.save(self.path)
+        self._csv = open(os.path.join(log_dir, "metrics.csv"), "a", buffering=1)  # noqa: SIM115
+        if self._csv.tell() == 0:
+            self._csv.write("iteration,tag,value\n")
 
     def add_scalar(self, tag: str, scalar_value: float, global_step: int) -> None:
         self.rec.set_time("iteration", sequence=int(global_step))
         self.rec.log(tag, rr.Scalars(float(scalar_value)))
+        self._csv.write(f"{int(global_step)},{tag},{float(scalar_value):.6g}\n")
 
     def store_config(self, env_cfg, train_cfg: dict) -> None:
         self.rec.log("config", rr.TextDocument(json.dumps(train_cfg, indent=2, default=str)), static=True)
 
     def stop(self) -> None:
         self.rec.flush()
+        self._csv.close()

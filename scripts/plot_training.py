@@ -1,0 +1,61 @@
+"""Plot a run's training curves from ``metrics.csv``: ``python scripts/plot_training.py <run_dir> [out.png]``."""
+
+from __future__ import annotations
+
+import csv
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+PANELS = [
+    ("Train/mean_reward", "mean episode return"),
+    ("Train/mean_episode_length", "mean episode length [steps]"),
+    ("Metrics/fall_rate", "fall rate (ended episodes)"),
+    ("Metrics/distance_error", "distance error DE [m]"),
+]
+
+
+def read_metrics(run_dir: Path) -> dict[str, list[tuple[int, float]]]:
+    path = run_dir / "metrics.csv"
+    if not path.is_file():
+        raise FileNotFoundError(f"no metrics.csv in {run_dir}")
+    series: dict[str, list[tuple[int, float]]] = defaultdict(list)
+    with path.open() as f:
+        for row in csv.DictReader(f):
+            series[row["tag"]].append((int(row["iteration"]), float(row["value"])))
+    return series
+
+
+def main(argv: list[str]) -> int:
+    if not argv:
+        print(__doc__, file=sys.stderr)
+        return 2
+    run_dir = Path(argv[0])
+    out = Path(argv[1]) if len(argv) > 1 else run_dir / "training.png"
+    series = read_metrics(run_dir)
+    fps = [v for _, v in series.get("Perf/total_fps", [])]
+    fig, axes = plt.subplots(2, 2, figsize=(10, 6.5))
+    for ax, (tag, label) in zip(axes.flat, PANELS, strict=True):
+        pts = series.get(tag, [])
+        if pts:
+            ax.plot([p[0] for p in pts], [p[1] for p in pts], lw=1.2)
+        ax.set_xlabel("iteration")
+        ax.set_title(label, fontsize=10)
+        ax.grid(alpha=0.3)
+    title = f"{run_dir.name}"
+    if fps:
+        title += f"  (mean {sum(fps) / len(fps):.0f} env steps/s incl. learning)"
+    fig.suptitle(title, fontsize=11)
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+    print(out)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

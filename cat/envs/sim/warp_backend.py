@@ -1,0 +1,275 @@
+"""``sim=warp``: N worlds of one model in mujoco_warp (``nworld=N``), state exposed as torch views.
+
+``qpos`` / ``qvel`` / ``sensordata`` are ``wp.to_torch`` views of the mujoco_warp ``Data`` arrays (float32,
+no copies); ``step`` writes ``ctrl`` into the ``d.ctrl`` view and runs ``decimation`` ``mjw.step`` calls,
+captured once as a CUDA graph on CUDA and launched directly on the Warp CPU device.
+
+Parity with ``MujocoBackend`` (MuJoCo C): both run the options of the model as compiled (G1: implicitfast,
+Newton, pyramidal cone), nothing needs aligning, and contacts come out identical (points, depths, counts).
+With a converging solver the trajectories agree to float32 rounding (1 s of G1 control: qpos ~1e-5).
+With the model's 5 Newton iterations the solve stops short of convergence and its result depends on the
+starting point: mujoco_warp carries the warmstart across ``step`` calls like an ``mj_step`` loop, while
+``mujoco.rollout`` restarts it at every call; this (and float32) makes contact-rich trajectories drift
+apart by about as much as two MuJoCo C runs differing only in warmstart (mm in qpos, up to ~1 rad/s in
+light joints' qvel over 1 s). See ``tests/test_sim_parity.py``. mujoco_warp flags unconverged solves
+(``OverflowType.ITERATIONS``) in ``overflow``; that is routine (float32 vs a 1e-8 tolerance) and not printed.
+
+Contact buffers are preallocated per world (``nconmax`` contacts, ``njmax`` constraint rows): a world that
+exceeds them drops contacts and sets its bit in ``overflow`` (see ``check_overflow``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+from collections.abc import Iterator
+
+import mujoco
+import mujoco_warp as mjw
+import numpy as np
+import torch
+import warp as wp
+
+from cat.envs.sim.base import PhysicsBackend
+
+logger = logging.getLogger(__name__)
+
+#: Contacts per world (pooled over worlds: ``nconmax * N`` in total). Measured with MuJoCo C: the G1 on the
+#: floor has <= 13 contacts even collapsed or lying flat; obstacles add a few per touching geom pair.
+DEFAULT_NCONMAX = 64
+#: Constraint rows per world (hard per-world limit): 4 per pyramidal condim-3 contact + active joint limits
+#: (<= 29). Measured <= 81 on the floor; 320 = 64 contacts * 4 + all limits, ~4x headroom for obstacles.
+DEFAULT_NJMAX = 320
+#: Overflow bits that mean dropped contacts / constraints (the others flag unconverged solves, not errors).
+BUFFER_OVERFLOWS = (
+    mjw.OverflowType.NEFC
+    | mjw.OverflowType.NJMAX_NNZ
+    | mjw.OverflowType.BROADPHASE
+    | mjw.OverflowType.NARROWPHASE
+    | mjw.OverflowType.CCD
+    | mjw.OverflowType.HFIELD
+    | mjw.OverflowType.CONTACT_MATCH
+    | mjw.OverflowType.EPA_HORIZON
+)
+
+# Model fields expanded over worlds so ``set_actuator_gains`` / ``set_body_mass_scale`` can randomise them.
+_PER_WORLD_FIELDS = ("actuator_gainprm", "actuator_biasprm", "body_mass", "body_inertia", "body_subtreemass")
+
+
+def resolve_device(device: str | None) -> str:
+    """Warp device name: ``None`` -> ``"cuda:0"`` when Warp sees a GPU, else ``"cpu"``."""
+    n_cuda = wp.get_cuda_device_count()
+    if device is None:
+        return "cuda:0" if n_cuda > 0 else "cpu"
+    if device == "cpu":
+        return "cpu"
+    if device.startswith("cuda"):
+        index = int(device.split(":", 1)[1]) if ":" in device else 0
+        if n_cuda == 0:
+            raise RuntimeError(
+                f"WarpBackend(device={device!r}) but Warp sees no CUDA device (no GPU, driver, or CUDA-enabled "
+                "warp-lang). Use device='cpu' (slow: mujoco_warp is built for GPUs), device=None to pick "
+                "automatically, or sim=mujoco for the MuJoCo C backend."
+            )
+        if index >= n_cuda:
+            raise RuntimeError(f"WarpBackend(device={device!r}) but Warp sees only {n_cuda} CUDA device(s)")
+        return f"cuda:{index}"
+    raise ValueError(f"WarpBackend device must be None, 'cpu' or 'cuda[:i]', got {device!r}")
+
+
+class WarpBackend(PhysicsBackend):
+    """mujoco_warp backend: one ``Data`` with ``nworld = num_envs``, torch views of its arrays.
+
+    Args:
+        model: compiled scene (``cat.envs.scene.build_env_model``).
+        num_envs: number of worlds N.
+        decimation: physics steps per ``step`` call.
+        device: ``"cpu"``, ``"cuda[:i]"`` or ``None`` (CUDA if available). Tensors live on the matching
+            torch device.
+        nconmax: contacts allocated per world (total ``nconmax * N``; a world may use more if others use
+            fewer).
+        njmax: constraint rows allocated per world (hard per-world limit).
+    """
+
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        num_envs: int,
+        decimation: int,
+        device: str | None = None,
+        nconmax: int = DEFAULT_NCONMAX,
+        njmax: int = DEFAULT_NJMAX,
+    ):
+        super().__init__(model, num_envs, decimation)
+        self.wp_device = wp.get_device(resolve_device(device))
+        self.device = wp.device_to_torch(self.wp_device)
+        self.nconmax, self.njmax = nconmax, njmax
+        self._stream: torch.cuda.Stream | None = None
+        if self.wp_device.is_cuda:
+            # Warp work runs on its own torch-known stream, ordered against the caller's stream (_sim_stream).
+            self._stream = torch.cuda.Stream(device=self.device)
+
+        with wp.ScopedDevice(self.wp_device):  # allocations land on the chosen device
+            self.m = mjw.put_model(model, batch_sizes={f: num_envs for f in _PER_WORLD_FIELDS})
+            self.m.opt.warn_overflow = int(BUFFER_OVERFLOWS)  # print buffer overflows, not solver iterations
+            self.d = mjw.make_data(model, nworld=num_envs, nconmax=nconmax, njmax=njmax)
+            self._reset_mask = wp.zeros(num_envs, dtype=bool)
+        d = self.d
+        self._qpos = wp.to_torch(d.qpos)
+        self._qvel = wp.to_torch(d.qvel)
+        self._ctrl = wp.to_torch(d.ctrl)
+        self._sens = wp.to_torch(d.sensordata)
+        self._overflow = wp.to_torch(d.overflow)
+        self._mask_t = wp.to_torch(self._reset_mask)
+        self._sens_saved = torch.empty_like(self._sens)
+        self._subtree: torch.Tensor | None = None  # (nbody, nbody) subtree membership, for mass scaling
+
+        with self._sim_stream():
+            mjw.reset_data(self.m, d)
+            if model.nkey > 0:
+                mjw.reset_data_keyframe(self.m, d, 0)
+            mjw.forward(self.m, d)
+            self._step_graph = self._capture_steps()
+        logger.info(
+            "WarpBackend: %d worlds on %s, nconmax=%d njmax=%d, CUDA graphs: %s",
+            num_envs,
+            self.wp_device,
+            nconmax,
+            njmax,
+            self._step_graph is not None,
+        )
+
+    # --- state views ---------------------------------------------------------------------------------
+    @property
+    def qpos(self) -> torch.Tensor:
+        return self._qpos
+
+    @property
+    def qvel(self) -> torch.Tensor:
+        return self._qvel
+
+    @property
+    def sensordata(self) -> torch.Tensor:
+        return self._sens
+
+    @property
+    def overflow(self) -> torch.Tensor:
+        """(N,) int32 mujoco_warp ``OverflowType`` bits per world since its last reset (sticky)."""
+        return self._overflow
+
+    def check_overflow(self) -> None:
+        """Raise if any world dropped contacts / constraints (``BUFFER_OVERFLOWS``); syncs with the device."""
+        bits = (self._overflow & int(BUFFER_OVERFLOWS)).cpu()
+        bad = torch.nonzero(bits).reshape(-1).tolist()
+        if bad:
+            flags = {f.name for f in mjw.OverflowType if f & BUFFER_OVERFLOWS and any(bits[i] & f for i in bad)}
+            raise RuntimeError(
+                f"mujoco_warp buffers overflowed in worlds {bad[:10]} ({', '.join(sorted(flags))}); "
+                f"raise WarpBackend nconmax (now {self.nconmax}) / njmax (now {self.njmax})"
+            )
+
+    # --- stepping ------------------------------------------------------------------------------------
+    def step(self, ctrl: torch.Tensor) -> None:
+        with self._sim_stream():
+            self._ctrl.copy_(ctrl)
+            self._launch(self._step_graph, self._physics_steps)
+
+    def reset(self, env_ids: torch.Tensor, qpos: torch.Tensor, qvel: torch.Tensor) -> None:
+        """Reset worlds ``env_ids`` as ``mj_resetData`` + state + ``mj_forward`` would; others keep everything.
+
+        ``mjw.forward`` runs on all worlds (mujoco_warp has no world mask there); it changes no state of
+        the other worlds (forward does not integrate or touch the warmstart), and their ``sensordata`` is
+        restored afterwards so it keeps the step-timing convention of ``base.py``.
+        """
+        ids = torch.as_tensor(env_ids, device=self.device, dtype=torch.long).reshape(-1)
+        if ids.numel() == 0:
+            return
+        with self._sim_stream():
+            self._mask_t.zero_()
+            self._mask_t[ids] = True
+            self._sens_saved.copy_(self._sens)
+            mjw.reset_data(self.m, self.d, self._reset_mask)
+            self._qpos[ids] = qpos.to(self._qpos).reshape(len(ids), -1)
+            self._qvel[ids] = qvel.to(self._qvel).reshape(len(ids), -1)
+            mjw.forward(self.m, self.d)
+            self._sens.copy_(torch.where(self._mask_t[:, None], self._sens, self._sens_saved))
+
+    def _physics_steps(self) -> None:
+        for _ in range(self.decimation):
+            mjw.step(self.m, self.d)
+
+    def _capture_steps(self) -> wp.Graph | None:
+        """CUDA graph of the decimation loop (CUDA only); ``None`` on the CPU device (launched directly)."""
+        if not self.wp_device.is_cuda:
+            return None
+        with wp.ScopedCapture(device=self.wp_device) as capture:
+            self._physics_steps()
+        return capture.graph
+
+    def _launch(self, graph: wp.Graph | None, fn) -> None:
+        if graph is not None:
+            wp.capture_launch(graph)
+        else:
+            fn()
+
+    @contextlib.contextmanager
+    def _sim_stream(self) -> Iterator[None]:
+        """On CUDA: run torch and warp work on one side stream, ordered after / before the caller's stream."""
+        if self._stream is None:
+            with wp.ScopedDevice(self.wp_device):
+                yield
+            return
+        caller = torch.cuda.current_stream(self.device)
+        self._stream.wait_stream(caller)
+        with (
+            torch.cuda.stream(self._stream),
+            wp.ScopedDevice(self.wp_device),
+            wp.ScopedStream(wp.stream_from_torch(self._stream)),
+        ):
+            yield
+        caller.wait_stream(self._stream)
+
+    # --- domain randomisation: per-world model arrays ---------------------------------------------------
+    def set_actuator_gains(self, env_ids: torch.Tensor, kp: torch.Tensor, kd: torch.Tensor) -> None:
+        ids = torch.as_tensor(env_ids, device=self.device, dtype=torch.long).reshape(-1)
+        gain = wp.to_torch(self.m.actuator_gainprm)  # (N, nu, 10)
+        bias = wp.to_torch(self.m.actuator_biasprm)
+        kp, kd = kp.to(gain), kd.to(gain)
+        with self._sim_stream():
+            gain[ids, :, 0] = kp
+            bias[ids, :, 1] = -kp
+            bias[ids, :, 2] = -kd
+
+    def set_body_mass_scale(self, env_ids: torch.Tensor, scale: torch.Tensor) -> None:
+        """Scale body masses and inertias per world; subtree masses follow (MuJoCo uses them for the COM)."""
+        ids = torch.as_tensor(env_ids, device=self.device, dtype=torch.long).reshape(-1)
+        mass = wp.to_torch(self.m.body_mass)  # (N, nbody)
+        inertia = wp.to_torch(self.m.body_inertia)  # (N, nbody, 3)
+        subtree = wp.to_torch(self.m.body_subtreemass)
+        m0 = torch.as_tensor(self.model.body_mass, dtype=mass.dtype, device=self.device)
+        i0 = torch.as_tensor(self.model.body_inertia, dtype=mass.dtype, device=self.device)
+        new_mass = m0 * scale.to(mass)
+        with self._sim_stream():
+            mass[ids] = new_mass
+            inertia[ids] = i0 * scale.to(mass)[..., None]
+            subtree[ids] = new_mass @ self._subtree_matrix().T
+
+    def _subtree_matrix(self) -> torch.Tensor:
+        """(nbody, nbody) 0/1 matrix: ``[i, j] = 1`` when body j is in the subtree of body i."""
+        if self._subtree is None:
+            self._subtree = torch.as_tensor(subtree_matrix(self.model), dtype=torch.float32, device=self.device)
+        return self._subtree
+
+
+def subtree_matrix(model: mujoco.MjModel) -> np.ndarray:
+    """(nbody, nbody) 0/1 matrix with ``[i, j] = 1`` when body j is body i or one of its descendants."""
+    n = model.nbody
+    s = np.eye(n)
+    for j in range(1, n):  # parents precede children in MuJoCo's body order
+        p = model.body_parentid[j]
+        while True:
+            s[p, j] = 1.0
+            if p == 0:
+                break
+            p = model.body_parentid[p]
+    return s

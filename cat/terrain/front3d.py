@@ -77,7 +77,7 @@ def load_front3d(
                     tags.append("arch")
             elif ref in furniture:
                 jid = furniture[ref].get("jid")
-                model = _model(model_dir, jid, cache, missing_models)
+                model = _model(model_dir, jid, cache, missing_models, path)
                 if model is not None:
                     parts.append(model.copy().apply_transform(tf))
                     tags.append("furniture")
@@ -120,7 +120,7 @@ def _arch_mesh(m: dict, path: Path) -> trimesh.Trimesh:
     return trimesh.Trimesh(v, f, process=True)
 
 
-def _model(model_dir: Path, jid, cache: dict, missing: str) -> trimesh.Trimesh | None:
+def _model(model_dir: Path, jid, cache: dict, missing: str, house: Path) -> trimesh.Trimesh | None:
     obj = model_dir / str(jid) / "raw_model.obj"
     if str(jid) in cache:
         return cache[str(jid)]
@@ -129,7 +129,7 @@ def _model(model_dir: Path, jid, cache: dict, missing: str) -> trimesh.Trimesh |
             log.warning("3D-FUTURE model missing, skipped: %s", obj)
             cache[str(jid)] = None
             return None
-        raise Front3DError(f"{obj}: 3D-FUTURE model not found (furniture jid {jid})")
+        raise Front3DError(f"{obj}: 3D-FUTURE model not found (furniture jid {jid} of {house})")
     try:
         mesh = trimesh.load(str(obj), force="mesh", process=True)
     except Exception as err:

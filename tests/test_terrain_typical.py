@@ -1,0 +1,68 @@
+"""The eight typical scene types: geometry facts, free space, reachability, determinism, difficulty."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cat.terrain import TYPICAL_KINDS, SceneError, check_scene, make_typical, typical_variants
+from cat.terrain.voxel import free_volume_fraction
+
+
+@pytest.mark.parametrize("kind", TYPICAL_KINDS)
+def test_variants_valid(kind):
+    scenes = typical_variants(kind, n=10, seed=0)
+    assert len(scenes) == 10
+    hashes = set()
+    for s in scenes:
+        assert s.kind == kind
+        assert s.mesh.is_watertight, f"{kind} d={s.difficulty}"
+        np.testing.assert_allclose(s.bounds, [[-0.5, -1, 0], [2.5, 1, 1.5]])
+        np.testing.assert_allclose(s.start, [0, 0, 0.75])
+        np.testing.assert_allclose(s.goals, [[2, 0, 0.75]])
+        assert s.grid().shape == (75, 50, 38)
+        lo, hi = s.mesh.bounds
+        assert np.all(lo >= s.bounds[0] - 1e-6) and np.all(hi <= s.bounds[1] + 1e-6)
+        check_scene(s)  # start/goals free with clearance, goal reachable by a humanoid
+        # the start region is clear for the robot
+        assert np.all(s.clearance(np.c_[s.start_region, [0.75, 0.75]]) > 0.2)
+        hashes.add(s.mesh.vertices.round(6).tobytes())
+    assert len(hashes) == 10  # ten distinct variants
+
+
+@pytest.mark.parametrize("kind", TYPICAL_KINDS)
+def test_deterministic_and_monotone(kind):
+    a, b = make_typical(kind, 0.4, seed=7), make_typical(kind, 0.4, seed=7)
+    np.testing.assert_array_equal(a.mesh.vertices, b.mesh.vertices)
+    np.testing.assert_array_equal(a.mesh.faces, b.mesh.faces)
+    assert not np.array_equal(make_typical(kind, 0.4, seed=8).mesh.vertices, a.mesh.vertices)
+    free = [free_volume_fraction(make_typical(kind, d, seed=3).occupancy()) for d in np.linspace(0, 1, 5)]
+    assert np.all(np.diff(free) <= 1e-9), free
+    assert free[-1] < free[0]
+
+
+def test_released_scene_facts():
+    """Hurdle tops 0.08-0.25 m, ceiling bottoms 1.00-1.15 m, slit walls 0.12 m thick, gaps >= 0.32 m."""
+    for d in (0.0, 1.0):
+        bars = make_typical("multi-hurdle", d, seed=1)
+        assert 0.06 <= bars.mesh.bounds[1, 2] <= 0.27
+        ceil = make_typical("crouch-pass", d, seed=1)
+        occ = ceil.occupancy()
+        x, y, z = ceil.grid().axes()
+        col = occ[np.argmin(np.abs(x - 1.0)) - 10 : np.argmin(np.abs(x - 1.0)) + 10, np.argmin(np.abs(y)), :]
+        bottoms = [z[np.argmax(c)] - 0.02 for c in col if c.any()]
+        assert bottoms and 0.98 <= min(bottoms) <= 1.17
+        slit = make_typical("side-pass", d, seed=1)
+        occ = slit.occupancy()
+        walls = occ[:, :, 10].any(1)
+        runs = np.diff(np.flatnonzero(np.diff(np.r_[0, walls.astype(int), 0])))[::2]
+        assert set(runs.tolist()) <= {3, 4}  # 0.12 m = 3 voxels (+1 at a voxel boundary)
+        gap = (~occ[:, :, 10]).sum(1)[walls].max() * 0.04
+        assert 0.28 <= gap <= 0.96
+
+
+def test_bad_inputs():
+    with pytest.raises(SceneError, match="unknown typical scene type"):
+        make_typical("jump-rope", 0.5, 0)
+    with pytest.raises(SceneError, match="difficulty"):
+        make_typical("side-pass", 1.5, 0)

@@ -215,39 +215,49 @@ def test_parity_model_solver(model, robot_cfg, scenario):
 
 
 def test_reset_subset_leaves_other_worlds_untouched(model, robot_cfg):
+    """reset(ids) == a fresh reset for those worlds (bitwise) and a no-op for the others (bitwise)."""
     n = 4
     qpos, qvel = initial_states(robot_cfg, n)
     ctrl = torch.as_tensor(actions(robot_cfg, n, 12), dtype=torch.float32)
-    a = WarpBackend(model, n, robot_cfg.decimation, device="cpu")
-    b = WarpBackend(model, n, robot_cfg.decimation, device="cpu")
-    for backend in (a, b):
+    a, twin = (WarpBackend(model, n, robot_cfg.decimation, device="cpu") for _ in range(2))
+    for backend in (a, twin):
         backend.reset(torch.arange(n), torch.as_tensor(qpos), torch.as_tensor(qvel))
         for u in ctrl[:6]:
             backend.step(u)
     keep, ids = torch.tensor([0, 2]), torch.tensor([1, 3])
-    before = [t.clone() for t in (a.qpos, a.qvel, a.sensordata)]
+    before = [t.clone() for t in (a.qpos, a.qvel, a.sensordata, wp_time(a))]
 
     new_qpos, new_qvel = initial_states(robot_cfg, 3, seed=5)
-    a.reset(ids, torch.as_tensor(new_qpos[1:]), torch.as_tensor(new_qvel[1:]))
-    for t, t0 in zip((a.qpos, a.qvel, a.sensordata), before, strict=True):
+    new_qpos, new_qvel = torch.as_tensor(new_qpos[1:]), torch.as_tensor(new_qvel[1:])
+    a.reset(ids, new_qpos, new_qvel)
+    for t, t0 in zip((a.qpos, a.qvel, a.sensordata, wp_time(a)), before, strict=True):
         assert torch.equal(t[keep], t0[keep])
-    torch.testing.assert_close(a.qpos[ids], torch.as_tensor(new_qpos[1:], dtype=torch.float32))
-    torch.testing.assert_close(a.qvel[ids], torch.as_tensor(new_qvel[1:], dtype=torch.float32))
+    assert (wp_time(a)[ids] == 0).all()
+    torch.testing.assert_close(a.qpos[ids], new_qpos.float())
+    torch.testing.assert_close(a.qvel[ids], new_qvel.float())
+
     # the reset worlds' sensors match MuJoCo C's mj_resetData + mj_forward on the same state
     ref = MujocoBackend(model, 2, robot_cfg.decimation)
-    ref.reset(torch.arange(2), torch.as_tensor(new_qpos[1:]), torch.as_tensor(new_qvel[1:]))
+    ref.reset(torch.arange(2), new_qpos, new_qvel)
     cols = sensor_columns(model)
     for group, tol in (("pos", 1e-4), ("vel", 1e-3), ("acc", 0.05), ("count", 0.0)):
         c = torch.as_tensor(cols[group])
         torch.testing.assert_close(a.sensordata[ids][:, c].double(), ref.sensordata[:, c], atol=tol, rtol=0)
 
-    # the kept worlds go on exactly as in a twin that was never reset (warmstart, time, contacts untouched)
+    # a fresh backend reset to the same states: the reset worlds carry no hidden state over (warmstart, ...)
+    fresh = WarpBackend(model, n, robot_cfg.decimation, device="cpu")
+    fresh.reset(torch.arange(n), a.qpos.clone(), a.qvel.clone())
+    assert torch.equal(fresh.sensordata[ids], a.sensordata[ids])
     for u in ctrl[6:]:
-        a.step(u)
-        b.step(u)
-        for ta, tb in ((a.qpos, b.qpos), (a.qvel, b.qvel), (a.sensordata, b.sensordata)):
-            assert torch.equal(ta[keep], tb[keep])
-    assert torch.equal(wp_time(a)[keep], wp_time(b)[keep])
+        for backend in (a, twin, fresh):
+            backend.step(u)
+        for ta, tb, tc in zip(state(a), state(twin), state(fresh), strict=True):
+            assert torch.equal(ta[keep], tb[keep])  # kept worlds go on as if nothing happened
+            assert torch.equal(ta[ids], tc[ids])  # reset worlds behave as freshly reset ones
+
+
+def state(backend: WarpBackend) -> tuple[torch.Tensor, ...]:
+    return backend.qpos, backend.qvel, backend.sensordata, wp_time(backend)
 
 
 def wp_time(backend: WarpBackend) -> torch.Tensor:

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 
 import mujoco
 import mujoco_warp as mjw
@@ -36,10 +36,11 @@ logger = logging.getLogger(__name__)
 
 #: Contacts per world (pooled over worlds: ``nconmax * N`` in total). Measured with MuJoCo C: the G1 on the
 #: floor has <= 13 contacts even collapsed or lying flat; obstacles add a few per touching geom pair.
-DEFAULT_NCONMAX = 64
+DEFAULT_NCONMAX = 48
 #: Constraint rows per world (hard per-world limit): 4 per pyramidal condim-3 contact + active joint limits
-#: (<= 29). Measured <= 81 on the floor; 320 = 64 contacts * 4 + all limits, ~4x headroom for obstacles.
-DEFAULT_NJMAX = 320
+#: (<= 29). Measured <= 81 on the floor; 192 leaves room for ~40 contacts. Larger costs speed (Warp CPU,
+#: N=256: 320 rows is ~13 % slower than 192).
+DEFAULT_NJMAX = 192
 #: Overflow bits that mean dropped contacts / constraints (the others flag unconverged solves, not errors).
 BUFFER_OVERFLOWS = (
     mjw.OverflowType.NEFC
@@ -50,6 +51,28 @@ BUFFER_OVERFLOWS = (
     | mjw.OverflowType.HFIELD
     | mjw.OverflowType.CONTACT_MATCH
     | mjw.OverflowType.EPA_HORIZON
+)
+
+# Data fields ``mj_resetData`` zeroes (mujoco_warp ``reset_data``; qpos is set to qpos0 separately).
+_ZEROED_FIELDS = (
+    "qvel",
+    "qacc_warmstart",
+    "qfrc_applied",
+    "qacc",
+    "ctrl",
+    "act",
+    "act_dot",
+    "userdata",
+    "sensordata",
+    "xfrc_applied",
+    "time",
+    "energy",
+    "solver_niter",
+    "ne",
+    "nf",
+    "nl",
+    "nefc",
+    "overflow",
 )
 
 # Model fields expanded over worlds so ``set_actuator_gains`` / ``set_body_mass_scale`` can randomise them.
@@ -108,6 +131,7 @@ class WarpBackend(PhysicsBackend):
         if self.wp_device.is_cuda:
             # Warp work runs on its own torch-known stream, ordered against the caller's stream (_sim_stream).
             self._stream = torch.cuda.Stream(device=self.device)
+            self._wp_stream = wp.stream_from_torch(self._stream)
 
         with wp.ScopedDevice(self.wp_device):  # allocations land on the chosen device
             self.m = mjw.put_model(model, batch_sizes={f: num_envs for f in _PER_WORLD_FIELDS})
@@ -123,13 +147,25 @@ class WarpBackend(PhysicsBackend):
         self._mask_t = wp.to_torch(self._reset_mask)
         self._sens_saved = torch.empty_like(self._sens)
         self._subtree: torch.Tensor | None = None  # (nbody, nbody) subtree membership, for mass scaling
+        self._zeroed = [wp.to_torch(getattr(d, f)) for f in _ZEROED_FIELDS if getattr(d, f).size > 0]
+        # model features whose reset state the torch reset does not cover: use mjw.reset_data (slower) then
+        self._torch_reset = not (
+            model.nmocap
+            or model.neq
+            or model.nflex
+            or model.nplugin
+            or self.m.nhistory
+            or self.m.nplastic
+            or model.opt.enableflags & mujoco.mjtEnableBit.mjENBL_SLEEP
+        )
 
         with self._sim_stream():
             mjw.reset_data(self.m, d)
             if model.nkey > 0:
                 mjw.reset_data_keyframe(self.m, d, 0)
             mjw.forward(self.m, d)
-            self._step_graph = self._capture_steps()
+            self._step_graph = self._capture(self._physics_steps)
+            self._forward_graph = self._capture(lambda: mjw.forward(self.m, self.d))
         logger.info(
             "WarpBackend: %d worlds on %s, nconmax=%d njmax=%d, CUDA graphs: %s",
             num_envs,
@@ -188,25 +224,29 @@ class WarpBackend(PhysicsBackend):
             self._mask_t.zero_()
             self._mask_t[ids] = True
             self._sens_saved.copy_(self._sens)
-            mjw.reset_data(self.m, self.d, self._reset_mask)
+            if self._torch_reset:  # same effect as mjw.reset_data, without its per-call kernel rebuild (~60 ms)
+                for t in self._zeroed:
+                    t[ids] = 0
+            else:
+                mjw.reset_data(self.m, self.d, self._reset_mask)
             self._qpos[ids] = qpos.to(self._qpos).reshape(len(ids), -1)
             self._qvel[ids] = qvel.to(self._qvel).reshape(len(ids), -1)
-            mjw.forward(self.m, self.d)
+            self._launch(self._forward_graph, lambda: mjw.forward(self.m, self.d))
             self._sens.copy_(torch.where(self._mask_t[:, None], self._sens, self._sens_saved))
 
     def _physics_steps(self) -> None:
         for _ in range(self.decimation):
             mjw.step(self.m, self.d)
 
-    def _capture_steps(self) -> wp.Graph | None:
-        """CUDA graph of the decimation loop (CUDA only); ``None`` on the CPU device (launched directly)."""
+    def _capture(self, fn: Callable[[], None]) -> wp.Graph | None:
+        """CUDA graph of ``fn`` (CUDA only); ``None`` on the CPU device, where ``fn`` is launched directly."""
         if not self.wp_device.is_cuda:
             return None
         with wp.ScopedCapture(device=self.wp_device) as capture:
-            self._physics_steps()
+            fn()
         return capture.graph
 
-    def _launch(self, graph: wp.Graph | None, fn) -> None:
+    def _launch(self, graph: wp.Graph | None, fn: Callable[[], None]) -> None:
         if graph is not None:
             wp.capture_launch(graph)
         else:
@@ -221,11 +261,7 @@ class WarpBackend(PhysicsBackend):
             return
         caller = torch.cuda.current_stream(self.device)
         self._stream.wait_stream(caller)
-        with (
-            torch.cuda.stream(self._stream),
-            wp.ScopedDevice(self.wp_device),
-            wp.ScopedStream(wp.stream_from_torch(self._stream)),
-        ):
+        with torch.cuda.stream(self._stream), wp.ScopedDevice(self.wp_device), wp.ScopedStream(self._wp_stream):
             yield
         caller.wait_stream(self._stream)
 

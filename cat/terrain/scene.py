@@ -172,6 +172,8 @@ class Scene:
         With ``check`` the start and goals must be in free space and reachable.
         """
         mesh = load_mesh(path)
+        if not mesh.is_watertight:
+            log.warning("%s: mesh is not watertight; its inside is taken from voxelising the surface", path)
         start = _point3(start, "start")
         goals = np.atleast_2d(np.asarray(goal, dtype=np.float64))
         if goals.shape[1] == 2:

@@ -2,7 +2,14 @@
 
 ``qpos`` / ``qvel`` / ``sensordata`` are ``wp.to_torch`` views of the mujoco_warp ``Data`` arrays (float32,
 no copies); ``step`` writes ``ctrl`` into the ``d.ctrl`` view and runs ``decimation`` ``mjw.step`` calls,
-captured once as a CUDA graph on CUDA and launched directly on the Warp CPU device.
+captured once as a CUDA graph on CUDA and launched directly on the Warp CPU device. On CUDA all torch and
+warp work of the backend runs on one side stream ordered against the caller's current stream. (The CUDA
+path could not be exercised on the 2-core, GPU-less dev machine; the tests cover the CPU device.)
+
+``reset`` does what ``mj_resetData`` + setting qpos/qvel + ``mj_forward`` does for the chosen worlds: the
+reset fields are zeroed with torch (``mjw.reset_data`` rebuilds its kernels on every call, ~60 ms of Python),
+then ``mjw.forward`` runs on all worlds (no per-world mask there; forward changes no state of the others)
+and the other worlds' ``sensordata`` is restored, keeping ``base.py``'s timing convention for them.
 
 Parity with ``MujocoBackend`` (MuJoCo C): both run the options of the model as compiled (G1: implicitfast,
 Newton, pyramidal cone), nothing needs aligning, and contacts come out identical (points, depths, counts).
@@ -79,9 +86,10 @@ _ZEROED_FIELDS = (
 _PER_WORLD_FIELDS = ("actuator_gainprm", "actuator_biasprm", "body_mass", "body_inertia", "body_subtreemass")
 
 
-def resolve_device(device: str | None) -> str:
+def resolve_device(device: str | torch.device | None) -> str:
     """Warp device name: ``None`` -> ``"cuda:0"`` when Warp sees a GPU, else ``"cpu"``."""
     n_cuda = wp.get_cuda_device_count()
+    device = str(device) if device is not None else None
     if device is None:
         return "cuda:0" if n_cuda > 0 else "cpu"
     if device == "cpu":
@@ -119,13 +127,13 @@ class WarpBackend(PhysicsBackend):
         model: mujoco.MjModel,
         num_envs: int,
         decimation: int,
-        device: str | None = None,
+        device: str | torch.device | None = None,
         nconmax: int = DEFAULT_NCONMAX,
         njmax: int = DEFAULT_NJMAX,
     ):
         super().__init__(model, num_envs, decimation)
         self.wp_device = wp.get_device(resolve_device(device))
-        self.device = wp.device_to_torch(self.wp_device)
+        self.device = torch.device(wp.device_to_torch(self.wp_device))
         self.nconmax, self.njmax = nconmax, njmax
         self._stream: torch.cuda.Stream | None = None
         if self.wp_device.is_cuda:
@@ -211,12 +219,7 @@ class WarpBackend(PhysicsBackend):
             self._launch(self._step_graph, self._physics_steps)
 
     def reset(self, env_ids: torch.Tensor, qpos: torch.Tensor, qvel: torch.Tensor) -> None:
-        """Reset worlds ``env_ids`` as ``mj_resetData`` + state + ``mj_forward`` would; others keep everything.
-
-        ``mjw.forward`` runs on all worlds (mujoco_warp has no world mask there); it changes no state of
-        the other worlds (forward does not integrate or touch the warmstart), and their ``sensordata`` is
-        restored afterwards so it keeps the step-timing convention of ``base.py``.
-        """
+        """Reset worlds ``env_ids`` as ``mj_resetData`` + state + ``mj_forward`` would; others keep everything."""
         ids = torch.as_tensor(env_ids, device=self.device, dtype=torch.long).reshape(-1)
         if ids.numel() == 0:
             return

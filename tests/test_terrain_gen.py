@@ -68,3 +68,29 @@ def test_gen_scenes_command_as_documented(tmp_path):
     r = _run(f"out={out}", "typical_variants=1", "procedural=2", "indoor=2", "seed=0")
     assert r.returncode == 0, r.stderr
     _check_folders(out, 12)
+
+
+def test_build_dataset_front3d_and_render(tmp_path):
+    """In-process builder: 3D-FRONT crops through gen_scenes' code path, previews rendered."""
+    from cat.terrain.dataset import GenScenesCfg, build_dataset
+
+    fix = ROOT / "tests" / "fixtures" / "3dfront"
+    cfg = GenScenesCfg(
+        out=str(tmp_path),
+        typical_variants=1,
+        typical_kinds=["side-pass"],
+        procedural=0,
+        indoor=2,
+        front3d_dir=str(fix / "house.json"),
+        future_dir=str(fix / "future"),
+        fields=False,
+        render=True,
+    )
+    index = build_dataset(cfg, progress=False)
+    assert [e["kind"] for e in index] == ["side-pass", "indoor", "indoor"]
+    for e in index:
+        folder = Path(e["folder"])
+        assert (folder / "preview.png").stat().st_size > 10_000
+        s = Scene.load(folder)
+        assert s.mesh.is_watertight
+    assert Scene.load(tmp_path / "indoor" / "indoor_000").meta["source"] == "fixture-house"

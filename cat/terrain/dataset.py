@@ -42,7 +42,7 @@ class GenScenesCfg:
     difficulty_min: float = 0.0
     difficulty_max: float = 1.0
     indoor: int = 20
-    front3d_dir: str | None = None  # folder of 3D-FRONT house JSONs; None -> embedded procedural houses
+    front3d_dir: str | None = None  # 3D-FRONT house JSON or folder of them; None -> embedded procedural houses
     future_dir: str | None = None  # 3D-FUTURE model folder (<jid>/raw_model.obj)
     fields: bool = True  # precompute HumanoidPF per goal when cat.fields is available
     field_source: str = "occupancy"  # "occupancy" (the scene's voxels) or "mesh"
@@ -64,12 +64,14 @@ def jobs(cfg: GenScenesCfg) -> list[Job]:
         if kind not in TYPICAL_KINDS:
             raise ValueError(f"unknown typical kind {kind!r}; valid: {', '.join(TYPICAL_KINDS)}")
         n = cfg.typical_variants
-        for v, d in enumerate(np.linspace(0.0, 1.0, n) if n > 1 else [0.5]):
+        for v, d in enumerate(_spread(0.0, 1.0, n, single=0.5)):
             seed = cfg.seed * 1000 + v
             todo.append(Job(out / "typical" / f"{kind}_{v:02d}", _bind(make_typical, kind, float(d), seed)))
     n = cfg.procedural
-    ds = np.linspace(cfg.difficulty_min, cfg.difficulty_max, n) if n > 1 else [cfg.difficulty_min]
-    for i, d in enumerate(ds):
+    if not 0.0 <= cfg.difficulty_min <= cfg.difficulty_max <= 1.0:
+        lo, hi = cfg.difficulty_min, cfg.difficulty_max
+        raise ValueError(f"need 0 <= difficulty_min <= difficulty_max <= 1, got {lo}, {hi}")
+    for i, d in enumerate(_spread(cfg.difficulty_min, cfg.difficulty_max, n, single=cfg.difficulty_min)):
         todo.append(Job(out / "procedural" / f"proc_{i:03d}", _bind(make_procedural, float(d), cfg.seed * 1000 + i)))
     houses = _front3d_houses(cfg)
     for i in range(cfg.indoor):
@@ -78,16 +80,24 @@ def jobs(cfg: GenScenesCfg) -> list[Job]:
     return todo
 
 
+def _spread(lo: float, hi: float, n: int, single: float) -> list[float]:
+    """``n`` difficulties evenly over [lo, hi] (``single`` when n == 1, none when n <= 0)."""
+    if n <= 0:
+        return []
+    return [float(single)] if n == 1 else [float(d) for d in np.linspace(lo, hi, n)]
+
+
 def _bind(fn: Callable, *args) -> Callable[[], Scene]:
     return lambda: fn(*args)
 
 
-def _front3d_houses(cfg: GenScenesCfg) -> list[Callable[[], House]] | list[House]:
+def _front3d_houses(cfg: GenScenesCfg) -> list[House]:
     if not cfg.front3d_dir:
         return []
     if not cfg.future_dir:
         raise ValueError("front3d_dir needs future_dir (the 3D-FUTURE model folder)")
-    files = sorted(Path(cfg.front3d_dir).glob("*.json"))
+    src = Path(cfg.front3d_dir)
+    files = [src] if src.is_file() else sorted(src.glob("*.json"))
     if not files:
         raise ValueError(f"{cfg.front3d_dir}: no 3D-FRONT house JSON files")
     return [load_front3d(f, cfg.future_dir, missing_models="skip") for f in files]

@@ -124,6 +124,8 @@ def test_reachability_model():
     cases = {
         "bar top 0.25": (box((1, -1, 0), (1.2, 1, 0.25)), True),
         "bar top 0.45": (box((1, -1, 0), (1.2, 1, 0.45)), False),
+        "low box 0.6 deep": (box((1, -1, 0), (1.6, 1, 0.2)), False),
+        "low box 0.36 deep": (box((1, -1, 0), (1.36, 1, 0.2)), True),
         "ceiling at 1.0": (box((1, -1, 1.0), (1.6, 1, 1.5)), True),
         "table at 0.75": (box((1, -1, 0.71), (1.6, 1, 0.75)), False),
         "slit 0.32": (combine([box((1, -1, 0), (1.12, -0.16, 1.5)), box((1, 0.16, 0), (1.12, 1, 1.5))]), True),

@@ -3,8 +3,10 @@
 One convention everywhere (DESIGN §4): voxel ``(i, j, k)`` has its centre at
 ``origin + (idx + 0.5) * voxel``. Reachability is a 2.5-D model of a humanoid: a floor column is
 *passable* when, above some free voxel no higher than ``step_height`` (a hurdle it can step over), there
-is a free vertical run of at least ``headroom`` (room for a crouched G1). Impassable columns are dilated
-by ``body_radius`` and the rest is flood-filled in 2-D from the start (``scipy.ndimage``).
+is a free vertical run of at least ``headroom`` (room for a crouched G1), and, if the floor itself is
+covered, the low obstacle is at most ``hurdle_depth`` deep (within half of it of usable floor).
+Impassable columns are dilated by ``body_radius`` and the rest is flood-filled in 2-D from the start
+(``scipy.ndimage``).
 """
 
 from __future__ import annotations
@@ -122,6 +124,7 @@ class ReachCfg:
     step_height: float = 0.30  # highest obstacle top the robot can hurdle (hurdle tops ≤ 0.25 m)
     headroom: float = 0.90  # free height a crouched G1 needs (ceiling bottoms ≥ 1.0 m)
     body_radius: float = 0.10  # lateral clearance (side-stepping through a slit: half torso depth)
+    hurdle_depth: float = 0.40  # deepest low obstacle one stride clears without touching it
 
 
 def passable_columns(occ: np.ndarray, grid: GridSpec, cfg: ReachCfg | None = None) -> np.ndarray:
@@ -136,7 +139,14 @@ def passable_columns(occ: np.ndarray, grid: GridSpec, cfg: ReachCfg | None = Non
         run[:, :, k] = acc
     k_step = min(max(int(np.floor(cfg.step_height / grid.voxel)), 0), nz - 1)
     need = min(int(np.ceil(cfg.headroom / grid.voxel - 1e-6)), nz)
-    return np.any(run[:, :, : k_step + 1] >= need, axis=2)
+    stand = run[:, :, 0] >= need  # a foot can go down here
+    step = np.any(run[:, :, : k_step + 1] >= need, axis=2)  # a leg can swing over a low obstacle here
+    if not stand.any():
+        return stand
+    # a low obstacle is only stepped over if it is at most hurdle_depth deep: every column of it lies
+    # within half that depth of ground the feet can use
+    depth = ndimage.distance_transform_edt(~stand) * grid.voxel
+    return step & (stand | (depth <= cfg.hurdle_depth / 2 + 0.5 * grid.voxel))
 
 
 def walkable(occ: np.ndarray, grid: GridSpec, cfg: ReachCfg | None = None) -> np.ndarray:

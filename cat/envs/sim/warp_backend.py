@@ -2,7 +2,8 @@
 
 ``qpos`` / ``qvel`` / ``sensordata`` are ``wp.to_torch`` views of the mujoco_warp ``Data`` arrays (float32,
 no copies); ``step`` writes ``ctrl`` into the ``d.ctrl`` view and runs ``decimation`` ``mjw.step`` calls,
-captured once as a CUDA graph on CUDA and launched directly on the Warp CPU device. On CUDA all torch and
+captured once and replayed: a CUDA graph on CUDA; on the CPU device Warp's own capture/replay (Warp >= 1.19,
+bitwise identical to eager launches, ~20x less Python overhead). On CUDA all torch and
 warp work of the backend runs on one side stream ordered against the caller's current stream. (The CUDA
 path could not be exercised on the 2-core, GPU-less dev machine; the tests cover the CPU device.)
 
@@ -120,6 +121,9 @@ class WarpBackend(PhysicsBackend):
         nconmax: contacts allocated per world (total ``nconmax * N``; a world may use more if others use
             fewer).
         njmax: constraint rows allocated per world (hard per-world limit).
+        graph: capture the decimation loop and the reset's forward pass once and replay them (CUDA graphs;
+            on the CPU, Warp >= 1.19 replays captured launches natively, ~20x faster than launching
+            mujoco_warp's ~150 kernels per physics step from Python). ``False``: launch eagerly.
     """
 
     def __init__(
@@ -130,11 +134,13 @@ class WarpBackend(PhysicsBackend):
         device: str | torch.device | None = None,
         nconmax: int = DEFAULT_NCONMAX,
         njmax: int = DEFAULT_NJMAX,
+        graph: bool = True,
     ):
         super().__init__(model, num_envs, decimation)
         self.wp_device = wp.get_device(resolve_device(device))
         self.device = torch.device(wp.device_to_torch(self.wp_device))
         self.nconmax, self.njmax = nconmax, njmax
+        self.use_graph = graph
         self._stream: torch.cuda.Stream | None = None
         if self.wp_device.is_cuda:
             # Warp work runs on its own torch-known stream, ordered against the caller's stream (_sim_stream).
@@ -175,7 +181,7 @@ class WarpBackend(PhysicsBackend):
             self._step_graph = self._capture(self._physics_steps)
             self._forward_graph = self._capture(lambda: mjw.forward(self.m, self.d))
         logger.info(
-            "WarpBackend: %d worlds on %s, nconmax=%d njmax=%d, CUDA graphs: %s",
+            "WarpBackend: %d worlds on %s, nconmax=%d njmax=%d, graph replay: %s",
             num_envs,
             self.wp_device,
             nconmax,
@@ -242,8 +248,8 @@ class WarpBackend(PhysicsBackend):
             mjw.step(self.m, self.d)
 
     def _capture(self, fn: Callable[[], None]) -> wp.Graph | None:
-        """CUDA graph of ``fn`` (CUDA only); ``None`` on the CPU device, where ``fn`` is launched directly."""
-        if not self.wp_device.is_cuda:
+        """Graph of ``fn``'s launches (CUDA graph; on the CPU Warp's API-capture replay), ``None`` if disabled."""
+        if not self.use_graph:
             return None
         with wp.ScopedCapture(device=self.wp_device) as capture:
             fn()

@@ -15,7 +15,7 @@ from cat.terrain.voxel import GridSpec, occupancy, occupancy_to_mesh, reachable
 
 
 def _pillar_scene() -> Scene:
-    mesh = box((0.8, -0.3, 0.0), (1.2, 0.3, 1.5))
+    mesh = box((0.81, -0.31, 0.0), (1.21, 0.31, 1.5))  # faces off voxel centres: occupancy is unambiguous
     return Scene(mesh=mesh, bounds=[[-0.5, -1, 0], [2.5, 1, 1.5]], start=[0, 0], goals=[[2, 0]], kind="test")
 
 
@@ -30,6 +30,12 @@ def test_save_load_roundtrip(tmp_path):
     assert loaded.mesh.is_watertight
     raw = json.loads((tmp_path / "s" / "scene.json").read_text())
     assert raw["grid"] == {"origin": [-0.5, -1.0, 0.0], "voxel": 0.04, "shape": [75, 50, 38]}
+    # the occupancy cache round-trips and equals re-voxelising the mesh
+    assert 0.04 in loaded._occ
+    np.testing.assert_array_equal(loaded.occupancy(), occupancy(loaded.mesh, loaded.grid()))
+    (tmp_path / "s" / "occupancy.npz").write_bytes(b"garbage")
+    again = Scene.load(tmp_path / "s")
+    assert 0.04 not in again._occ and again.occupancy().sum() == loaded.occupancy().sum()
 
 
 def test_grid_convention_and_occupancy():

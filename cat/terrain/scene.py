@@ -24,6 +24,7 @@ log = logging.getLogger(__name__)
 FORMAT_VERSION = 1
 GOAL_HEIGHT = 0.75
 MESH_FILE = "mesh.ply"
+OCC_FILE = "occupancy.npz"
 SCENE_FILE = "scene.json"
 FIELDS_DIR = "fields"
 MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
@@ -107,8 +108,11 @@ class Scene:
             "meta": self.meta,
         }
 
-    def save(self, folder: str | os.PathLike) -> Path:
-        """Write ``mesh.ply`` then ``scene.json`` (last: its presence marks a complete folder)."""
+    def save(self, folder: str | os.PathLike, occupancy: bool = True) -> Path:
+        """Write ``mesh.ply`` (+ ``occupancy.npz``) then ``scene.json`` (last: it marks a complete folder).
+
+        The occupancy on the default grid is a cache (bit-packed) so loading skips re-voxelising the mesh.
+        """
         validate_mesh(self.mesh, "scene mesh", allow_empty=True)
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
@@ -116,6 +120,10 @@ class Scene:
         tmp = folder / (MESH_FILE + ".tmp")
         tmp.write_bytes(trimesh.exchange.ply.export_ply(self.mesh, encoding="binary"))
         tmp.replace(folder / MESH_FILE)
+        if occupancy:
+            occ = self.occupancy()
+            np.savez_compressed(folder / "occupancy.tmp.npz", bits=np.packbits(occ.ravel()), shape=occ.shape)
+            (folder / "occupancy.tmp.npz").replace(folder / OCC_FILE)
         (folder / (SCENE_FILE + ".tmp")).write_text(data)
         (folder / (SCENE_FILE + ".tmp")).replace(folder / SCENE_FILE)
         return folder
@@ -136,7 +144,7 @@ class Scene:
         mesh_path = folder / raw.get("mesh", MESH_FILE)
         mesh = load_mesh(mesh_path, allow_empty=True)
         try:
-            return cls(
+            scene = cls(
                 mesh=mesh,
                 bounds=np.array(raw["bounds"]),
                 start=np.array(raw["start"]),
@@ -149,6 +157,22 @@ class Scene:
             )
         except (KeyError, ValueError, TypeError) as err:
             raise SceneError(f"{path}: bad scene description ({err!r})") from err
+        scene._load_occupancy(folder / OCC_FILE)
+        return scene
+
+    def _load_occupancy(self, path: Path) -> None:
+        """Fill the occupancy cache from ``occupancy.npz`` if present and matching the grid."""
+        if not path.is_file():
+            return
+        try:
+            data = np.load(path)
+            shape = tuple(int(v) for v in data["shape"])
+            if shape != self.grid().shape:
+                log.warning("%s: shape %s does not match the scene grid; ignored", path, shape)
+                return
+            self._occ[VOXEL] = np.unpackbits(data["bits"], count=int(np.prod(shape))).astype(bool).reshape(shape)
+        except (OSError, KeyError, ValueError) as err:
+            log.warning("%s: unreadable occupancy cache (%s); re-voxelising the mesh", path, err)
 
     @staticmethod
     def fields_dir(folder: str | os.PathLike) -> Path:

@@ -1,0 +1,20 @@
+"""Warp helpers shared by the field modules (device choice, array conversion)."""
+
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+
+def get_device(device: str | None = None) -> wp.context.Device:
+    """Warp device: the given one, else CUDA when present, else the CPU."""
+    wp.init()
+    if device is None:
+        return wp.get_device("cuda:0") if wp.is_cuda_available() else wp.get_device("cpu")
+    return wp.get_device(str(device))
+
+
+def to_wp(a, dtype, device) -> wp.array:
+    """Numpy array → Warp array (C-contiguous copy of the right dtype)."""
+    np_dtype = {wp.float32: np.float32, wp.int32: np.int32, wp.uint8: np.uint8}[dtype]
+    return wp.array(np.ascontiguousarray(a, dtype=np_dtype), dtype=dtype, device=device)

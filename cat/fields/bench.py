@@ -1,0 +1,91 @@
+"""Fields benchmark (``python scripts/bench.py fields``): full rebuild vs a scikit-fmm/numpy reference,
+and the 4096-env × 13-link query. Prints one line per case (the only stdout output)."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import time
+
+import numpy as np
+import torch
+
+from cat.fields.bank import FieldBank
+from cat.fields.config import FieldCfg
+from cat.fields.field import build_field
+from cat.fields.grid import Grid
+from cat.fields.scenes import TYPICAL_GOAL, TYPICAL_GRID, WINDOW_GRID, cluttered_window, hurdle_crouch
+
+log = logging.getLogger(__name__)
+
+
+def reference_build(occ: np.ndarray, grid: Grid, goal, cfg: FieldCfg) -> np.ndarray:
+    """The released code's pipeline on the same occupancy: scikit-fmm SDF and geodesic, numpy gradient."""
+    import skfmm
+
+    h = grid.voxel
+    sdf = skfmm.distance(np.where(occ, -0.5, 0.5) * h, dx=h)
+    r0 = 1.5 * h
+    phi = np.ma.MaskedArray(np.linalg.norm(grid.centers() - np.asarray(goal), axis=-1) - r0, occ)
+    geo = np.ma.filled(skfmm.distance(phi, dx=h), np.inf) + r0
+    dc = np.maximum(sdf, cfg.d_min)
+    u_rep = np.where(sdf < cfg.d0, 0.5 * cfg.xi * (1.0 / dc - 1.0 / cfg.d0) ** 2, 0.0)
+    u = cfg.eta * np.where(np.isfinite(geo), geo, geo[np.isfinite(geo)].max()) + u_rep
+    return -np.stack(np.gradient(u, h), axis=-1)
+
+
+def _median_ms(fn, repeat: int) -> float:
+    ts = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        fn()
+        ts.append((time.perf_counter() - t0) * 1e3)
+    return float(np.median(ts))
+
+
+def bench_build(name: str, occ: np.ndarray, grid: Grid, goal, repeat: int) -> None:
+    cfg = FieldCfg()
+    build_field(occ, grid, goal, cfg)  # compile / load kernels, allocate workspaces
+    ours = _median_ms(lambda: build_field(occ, grid, goal, cfg), repeat)
+    ref = _median_ms(lambda: reference_build(occ, grid, goal, cfg), max(1, repeat // 2))
+    nx, ny, nz = grid.shape
+    print(
+        f"case={name} grid={nx}x{ny}x{nz} build_ms={ours:.1f} reference_ms={ref:.1f} speedup={ref / ours:.2f}",
+        flush=True,
+    )
+
+
+def bench_query(envs: int, links: int, n_fields: int, repeat: int) -> None:
+    """Bank of ``n_fields`` typical-scene fields (different goals); each env's links within ±0.7 m of
+    its pelvis, envs spread over the course and over the fields."""
+    occ = hurdle_crouch()
+    rng = np.random.default_rng(0)
+    goals = [(2.0, y, 0.75) for y in np.linspace(-0.6, 0.6, n_fields)]
+    bank = FieldBank.from_fields([build_field(occ, TYPICAL_GRID, g) for g in goals])
+    idx = torch.as_tensor(rng.integers(0, n_fields, envs), dtype=torch.int32)
+    root = torch.as_tensor(rng.uniform([-0.3, -0.8, 0.7], [2.3, 0.8, 0.8], (envs, 1, 3)), dtype=torch.float32)
+    pts = root + torch.as_tensor(rng.uniform(-0.35, 0.35, (envs, links, 3)), dtype=torch.float32) * torch.tensor(
+        [1.0, 1.0, 2.0]
+    )
+    out = bank.query(idx, pts)
+    ms = _median_ms(lambda: bank.query(idx, pts, out), repeat)
+    print(f"case=query envs={envs} links={links} query_ms={ms:.2f}", flush=True)
+
+
+def main(argv: list[str] | None = None) -> None:
+    p = argparse.ArgumentParser(prog="bench.py fields", description=__doc__)
+    p.add_argument("--repeat", type=int, default=7, help="timed repetitions per case (median reported)")
+    p.add_argument("--envs", type=int, default=4096)
+    p.add_argument("--fields", type=int, default=8, help="fields in the query bank")
+    args = p.parse_args(argv)
+    import warp as wp
+
+    wp.config.log_level = getattr(wp, "LOG_WARNING", wp.config.log_level)  # keep stdout to result lines
+    torch.set_num_threads(1)
+    bench_build("typical", hurdle_crouch(), TYPICAL_GRID, TYPICAL_GOAL, args.repeat)
+    bench_build("window", cluttered_window(), WINDOW_GRID, (0.0, 0.0, 0.75), args.repeat)
+    bench_query(args.envs, 13, args.fields, args.repeat * 5)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,34 @@
+"""Constants of HumanoidPF that the paper leaves open (see docs/fields.md for the reasons)."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+
+@dataclass
+class FieldCfg:
+    """HumanoidPF constants. Units: metres, seconds; potentials are dimensionless."""
+
+    eta: float = 1.0
+    """Attraction gain: U_att = eta * geodesic distance, so |F_att| = eta (Eikonal)."""
+    d0: float = 0.3
+    """Repulsion influence range (m): U_rep = 0 for d > d0."""
+    xi: float = 0.0068
+    """Repulsion gain: repulsion equals attraction (|F_rep| = eta) at d = d0/2 = 0.15 m with eta = 1."""
+    d_min: float = 0.02
+    """Distances below this (incl. inside obstacles) are clamped to it in U_rep so F stays finite."""
+    lam: float = 1.0
+    """Collision-urgency scale lambda in w1 = lam * max(-grad d . v, 0.5) * exp(-d)."""
+    w_root: float = 1.0
+    """Priority weight w0 of the root link (pelvis)."""
+    w_other: float = 0.5
+    """Priority weight w0 of every other link."""
+    kappa_max: float = 10.0
+    """vMF concentration scale: kappa = kappa_max * |F_H|."""
+    kappa_cap: float = 100.0
+    """Safety clip on kappa (fast links near obstacles); far above typical values (< 30)."""
+    goal_init_radius: float = 4.0
+    """Voxels within this many voxels of the goal start with their exact Euclidean distance."""
+
+    def to_dict(self) -> dict:
+        return asdict(self)

@@ -1,0 +1,278 @@
+# ruff: noqa: UP018  (Warp kernels need int(0)/float(0.0) to declare mutable locals)
+"""HumanoidPF potential and force on a grid: U = η·geo + U_rep(d), F = −∇U (paper §III-A, eqs. 1–3).
+
+``build_field`` runs the whole pipeline — SDF, geodesic distance, potential and force — as Warp kernels.
+On the CPU the exact EDT (one core) and the fast march (one core) run concurrently in two threads.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import threading
+from dataclasses import dataclass, field
+
+import numpy as np
+import trimesh
+import warp as wp
+
+from cat.fields import geodesic as geo_mod
+from cat.fields import sdf as sdf_mod
+from cat.fields._wp import get_device, to_wp
+from cat.fields.config import FieldCfg
+from cat.fields.grid import Grid
+
+log = logging.getLogger(__name__)
+
+FORMAT_VERSION = 1
+CHANNELS = ("fx", "fy", "fz", "sdf", "gx", "gy", "gz", "geo")
+"""Per-voxel channels of a field (and of a :class:`FieldBank`): F, d, ∇d, geodesic (extended)."""
+NUM_CHANNELS = len(CHANNELS)
+GEO_FILL = 1.0e3
+"""Geodesic channel value (m) for blocked/unreachable voxels not adjacent to a reachable one."""
+
+
+@wp.func
+def _geo_grad(g0: float, gm: float, gp: float, h: float) -> float:
+    """Derivative of the geodesic along one axis: central where both neighbours are reachable,
+    one-sided where only one is (never across an obstacle), 0 where neither is."""
+    lim = float(1.0e19)
+    if g0 >= lim:
+        return 0.0
+    if gm < lim and gp < lim:
+        return (gp - gm) / (2.0 * h)
+    if gp < lim:
+        return (gp - g0) / h
+    if gm < lim:
+        return (g0 - gm) / h
+    return 0.0
+
+
+@wp.func
+def _sdf_grad(sdf: wp.array3d(dtype=float), i: int, j: int, k: int, h: float) -> wp.vec3:
+    """Central differences of d (one-sided at the grid boundary)."""
+    nx = sdf.shape[0]
+    ny = sdf.shape[1]
+    nz = sdf.shape[2]
+    i0 = wp.max(i - 1, 0)
+    i1 = wp.min(i + 1, nx - 1)
+    j0 = wp.max(j - 1, 0)
+    j1 = wp.min(j + 1, ny - 1)
+    k0 = wp.max(k - 1, 0)
+    k1 = wp.min(k + 1, nz - 1)
+    gx = float(0.0)
+    gy = float(0.0)
+    gz = float(0.0)
+    if i1 > i0:
+        gx = (sdf[i1, j, k] - sdf[i0, j, k]) / (float(i1 - i0) * h)
+    if j1 > j0:
+        gy = (sdf[i, j1, k] - sdf[i, j0, k]) / (float(j1 - j0) * h)
+    if k1 > k0:
+        gz = (sdf[i, j, k1] - sdf[i, j, k0]) / (float(k1 - k0) * h)
+    return wp.vec3(gx, gy, gz)
+
+
+@wp.kernel
+def _field_kernel(
+    sdf: wp.array3d(dtype=float),
+    geo: wp.array(dtype=float),
+    h: float,
+    eta: float,
+    xi: float,
+    d0: float,
+    d_min: float,
+    geo_fill: float,
+    out: wp.array4d(dtype=float),
+    potential: wp.array3d(dtype=float),
+):
+    """One thread per (i, j) row: U, F = −η∇geo − U_rep'(d)∇d, ∇d and the extended geodesic."""
+    i, j = wp.tid()
+    ny = sdf.shape[1]
+    nz = sdf.shape[2]
+    pz = nz + 4
+    sx = (ny + 4) * pz
+    lim = float(1.0e19)
+    for k in range(nz):
+        p = ((i + 2) * (ny + 4) + (j + 2)) * pz + (k + 2)
+        g0 = geo[p]
+        gxm = geo[p - sx]
+        gxp = geo[p + sx]
+        gym = geo[p - pz]
+        gyp = geo[p + pz]
+        gzm = geo[p - 1]
+        gzp = geo[p + 1]
+        d = sdf[i, j, k]
+        gd = _sdf_grad(sdf, i, j, k, h)
+        grad_geo = wp.vec3(_geo_grad(g0, gxm, gxp, h), _geo_grad(g0, gym, gyp, h), _geo_grad(g0, gzm, gzp, h))
+        f = -eta * grad_geo
+        u_rep = float(0.0)
+        if d < d0:
+            dc = wp.max(d, d_min)
+            s = 1.0 / dc - 1.0 / d0
+            u_rep = 0.5 * xi * s * s
+            f = f + (xi * s / (dc * dc)) * gd
+        if g0 < lim:
+            potential[i, j, k] = eta * g0 + u_rep
+        else:
+            potential[i, j, k] = wp.inf
+            # extend the geodesic one voxel into blocked space so interpolation at surfaces stays sane
+            gn = wp.min(wp.min(wp.min(gxm, gxp), wp.min(gym, gyp)), wp.min(gzm, gzp))
+            if gn < lim:
+                g0 = gn + h
+            else:
+                g0 = geo_fill
+        out[i, j, k, 0] = f[0]
+        out[i, j, k, 1] = f[1]
+        out[i, j, k, 2] = f[2]
+        out[i, j, k, 3] = d
+        out[i, j, k, 4] = gd[0]
+        out[i, j, k, 5] = gd[1]
+        out[i, j, k, 6] = gd[2]
+        out[i, j, k, 7] = g0
+
+
+@dataclass
+class Field:
+    """A built HumanoidPF on one grid for one goal (numpy float32 arrays, C-ordered (nx, ny, nz, ...))."""
+
+    grid: Grid
+    goal: np.ndarray
+    data: np.ndarray
+    """(nx, ny, nz, 8) channels :data:`CHANNELS`: F (3), d, ∇d (3), geodesic extended by one voxel."""
+    geodesic: np.ndarray
+    """(nx, ny, nz) geodesic distance to the goal (m); +inf where blocked or unreachable."""
+    potential: np.ndarray
+    """(nx, ny, nz) U = η·geo + U_rep(d); +inf where the geodesic is."""
+    cfg: FieldCfg = field(default_factory=FieldCfg)
+
+    @property
+    def force(self) -> np.ndarray:
+        """F = −∇U, (nx, ny, nz, 3); finite everywhere."""
+        return self.data[..., 0:3]
+
+    @property
+    def sdf(self) -> np.ndarray:
+        """Signed distance d (m), (nx, ny, nz); positive in free space."""
+        return self.data[..., 3]
+
+    @property
+    def grad_sdf(self) -> np.ndarray:
+        """∇d by central differences, (nx, ny, nz, 3)."""
+        return self.data[..., 4:7]
+
+    @property
+    def reachable(self) -> np.ndarray:
+        return np.isfinite(self.geodesic)
+
+    def save(self, path) -> None:
+        """Write an ``.npz`` with the arrays, grid metadata, goal, constants and a format version."""
+        np.savez_compressed(
+            path,
+            format_version=np.int64(FORMAT_VERSION),
+            origin=np.asarray(self.grid.origin, dtype=np.float64),
+            voxel=np.float64(self.grid.voxel),
+            shape=np.asarray(self.grid.shape, dtype=np.int64),
+            goal=np.asarray(self.goal, dtype=np.float64),
+            data=self.data,
+            geodesic=self.geodesic,
+            potential=self.potential,
+            cfg=np.asarray(json.dumps(self.cfg.to_dict())),
+            channels=np.asarray(",".join(CHANNELS)),
+        )
+
+    @classmethod
+    def load(cls, path) -> Field:
+        with np.load(path, allow_pickle=False) as z:
+            version = int(z["format_version"]) if "format_version" in z else -1
+            if version != FORMAT_VERSION:
+                raise ValueError(f"{path}: field format version {version}, expected {FORMAT_VERSION}")
+            grid = Grid(tuple(z["origin"]), float(z["voxel"]), tuple(int(v) for v in z["shape"]))
+            cfg = FieldCfg(**json.loads(str(z["cfg"])))
+            return cls(grid, z["goal"].copy(), z["data"].copy(), z["geodesic"].copy(), z["potential"].copy(), cfg)
+
+
+def mesh_free_mask(sdf: np.ndarray, grid: Grid) -> np.ndarray:
+    """Free voxels for the geodesic of a mesh scene: centre farther than half a voxel from the surface
+    (and outside). Any surface crossing the segment between two face-adjacent centres lies within
+    h/2 of one of them, so even a zero-thickness wall blocks the 6-neighbour fast march."""
+    return sdf > 0.5 * grid.voxel
+
+
+_LOADED: set[str] = set()
+
+
+def _load_modules(dev) -> None:
+    """Compile/load the kernel modules once before two threads launch from them."""
+    if str(dev) not in _LOADED:
+        wp.load_module(sdf_mod, device=dev)
+        wp.load_module(geo_mod, device=dev)
+        _LOADED.add(str(dev))
+
+
+def _check_goal(goal) -> np.ndarray:
+    g = np.asarray(goal, dtype=np.float64)
+    if g.shape != (3,):
+        raise ValueError(f"goal must be a 3-vector, got shape {g.shape}")
+    if not np.all(np.isfinite(g)):
+        raise ValueError(f"goal must be finite, got {g.tolist()}")
+    return g
+
+
+def build_field(
+    obstacles,
+    grid: Grid,
+    goal,
+    cfg: FieldCfg | None = None,
+    device: str | None = None,
+    method: str = "auto",
+) -> Field:
+    """Build HumanoidPF for ``goal`` from a ``trimesh.Trimesh`` or a boolean occupancy of ``grid.shape``.
+
+    Raises ValueError for a goal outside the grid or inside an obstacle, a mismatched occupancy shape,
+    an empty mesh or NaN input."""
+    cfg = cfg or FieldCfg()
+    goal = _check_goal(goal)
+    dev = get_device(device)
+    h = grid.voxel
+    if isinstance(obstacles, trimesh.Trimesh):
+        sdf_wp = sdf_mod.sdf_from_mesh_wp(obstacles, grid, dev)
+        free_np = mesh_free_mask(sdf_wp.numpy(), grid)
+        geo_wp = geo_mod.geodesic_padded_wp(free_np, grid, goal, dev, cfg.goal_init_radius, method)
+    else:
+        occ = sdf_mod.check_occupancy(obstacles, grid)
+        free_np = occ == 0
+        occ_wp = to_wp(occ, wp.uint8, dev)
+        sdf_wp = wp.empty(grid.shape, dtype=float, device=dev)
+        if dev.is_cpu:
+            # both solvers are single-core Warp launches (ctypes releases the GIL): overlap them
+            _load_modules(dev)
+            err: list[BaseException] = []
+
+            def _edt() -> None:
+                try:
+                    sdf_mod.sdf_from_occupancy_wp(occ_wp, grid, sdf_wp)
+                except BaseException as e:  # re-raised in the caller
+                    err.append(e)
+
+            th = threading.Thread(target=_edt)
+            th.start()
+            try:
+                geo_wp = geo_mod.geodesic_padded_wp(free_np, grid, goal, dev, cfg.goal_init_radius, method)
+            finally:
+                th.join()
+            if err:
+                raise err[0]
+        else:
+            sdf_mod.sdf_from_occupancy_wp(occ_wp, grid, sdf_wp)
+            geo_wp = geo_mod.geodesic_padded_wp(free_np, grid, goal, dev, cfg.goal_init_radius, method)
+    out = wp.empty((*grid.shape, NUM_CHANNELS), dtype=float, device=dev)
+    pot = wp.empty(grid.shape, dtype=float, device=dev)
+    wp.launch(
+        _field_kernel,
+        dim=grid.shape[:2],
+        inputs=[sdf_wp, geo_wp, h, cfg.eta, cfg.xi, cfg.d0, cfg.d_min, GEO_FILL, out, pot],
+        device=dev,
+    )
+    geo = geo_mod.unpad(geo_wp.numpy(), grid)
+    geo = np.where(geo >= 1.0e19, np.inf, geo).astype(np.float32)
+    return Field(grid, goal, out.numpy(), geo, pot.numpy(), cfg)

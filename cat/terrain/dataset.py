@@ -46,6 +46,7 @@ class GenScenesCfg:
     future_dir: str | None = None  # 3D-FUTURE model folder (<jid>/raw_model.obj)
     fields: bool = True  # precompute HumanoidPF per goal when cat.fields is available
     field_source: str = "occupancy"  # "occupancy" (the scene's voxels) or "mesh"
+    max_field_goals: int = -1  # fields for the first N goals only (-1: all); a field is ~2-25 MB
     convex_parts: bool = False  # warm the coacd cache for the MuJoCo export
     render: bool = False  # write preview.png per scene
 
@@ -113,8 +114,8 @@ def _field_api():
     return Grid, build_field
 
 
-def build_fields(scene: Scene, folder: Path, source: str = "occupancy") -> bool:
-    """Precompute one HumanoidPF per goal into ``folder/fields``; True when all goals have one."""
+def build_fields(scene: Scene, folder: Path, source: str = "occupancy", max_goals: int = -1) -> bool:
+    """Precompute one HumanoidPF per goal into ``folder/fields``; True when all (or ``max_goals``) exist."""
     api = _field_api()
     if api is None:
         return False
@@ -124,7 +125,10 @@ def build_fields(scene: Scene, folder: Path, source: str = "occupancy") -> bool:
     obstacles = scene.occupancy() if source == "occupancy" else scene.mesh
     out = Scene.fields_dir(folder)
     out.mkdir(exist_ok=True)
-    for i, goal in enumerate(scene.goals):
+    if source not in ("occupancy", "mesh"):
+        raise ValueError(f"field_source must be 'occupancy' or 'mesh', got {source!r}")
+    goals = scene.goals if max_goals < 0 else scene.goals[:max_goals]
+    for i, goal in enumerate(goals):
         path = out / f"goal_{i:02d}.npz"
         if path.exists():
             continue
@@ -144,7 +148,7 @@ def build_one(job: Job, cfg: GenScenesCfg) -> dict:
     else:
         scene = job.make()
         scene.save(folder)
-    complete = build_fields(scene, folder, cfg.field_source) if cfg.fields else True
+    complete = build_fields(scene, folder, cfg.field_source, cfg.max_field_goals) if cfg.fields else True
     if cfg.convex_parts:
         from cat.terrain.mujoco_export import convex_parts
 

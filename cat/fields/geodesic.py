@@ -113,7 +113,6 @@ def _solve(T: wp.array(dtype=float), idx: int, sx: int, sy: int, h: float) -> fl
 @wp.kernel
 def _fmm_kernel(
     T: wp.array(dtype=float),
-    Tt: wp.array(dtype=float),
     flag: wp.array(dtype=wp.uint8),
     seeds: wp.array(dtype=int),
     head: wp.array(dtype=int),
@@ -128,10 +127,11 @@ def _fmm_kernel(
 ):
     """Whole fast march in one thread with a circular bucket queue (untidy priority queue).
 
-    ``T`` holds accepted values only (INF elsewhere; seeds are accepted on entry), ``Tt`` the tentative
-    values. Bucket width is ``1/inv_delta`` (h/16): voxels are accepted in order of ``Tt`` up to that
-    width, which perturbs the result far below the discretisation error while making push/pop O(1).
-    Entries are lazy: a voxel re-pushed with a smaller value leaves a stale entry that is skipped."""
+    ``T`` holds the current values (seeds exact and accepted on entry, INF where unknown); updates read
+    accepted and tentative neighbours alike (values only decrease, so tentative ones are upper bounds).
+    Bucket width is ``1/inv_delta`` (h/16): voxels are accepted in order of T up to that width, which
+    perturbs the result far below the discretisation error while making push/pop O(1). Entries are
+    lazy: a voxel re-pushed with a smaller value leaves a stale entry that is skipped when popped."""
     nb_buckets = head.shape[0]
     cap = node_idx.shape[0]
     for b in range(nb_buckets):
@@ -159,7 +159,6 @@ def _fmm_kernel(
             if flag[idx] != wp.uint8(_TRIAL):
                 continue
             flag[idx] = wp.uint8(_DONE)
-            T[idx] = Tt[idx]
         for nb in range(6):
             off = int(1)
             if nb < 2:
@@ -178,11 +177,11 @@ def _fmm_kernel(
                     continue
             if fm == wp.uint8(_FAR_STATE) or fm == wp.uint8(_TRIAL):
                 tn = _solve(T, m, sx, sy, h)
-                if tn < Tt[m]:
+                if tn < T[m]:
                     if top >= cap:
                         overflow[0] = 1
                         return
-                    Tt[m] = tn
+                    T[m] = tn
                     flag[m] = wp.uint8(_TRIAL)
                     slot = wp.clamp(int(tn * inv_delta), cb, cb + nb_buckets - 1) % nb_buckets
                     node_idx[top] = m
@@ -288,7 +287,7 @@ def geodesic_padded_wp(
     if method == "fmm":
         ws = _FmmWorkspace.get(n, device)
         seeds_wp = wp.array(seeds_p.astype(np.int32), dtype=int, device=device)
-        inputs = [T, wp.clone(T), flag, seeds_wp, ws["head"], ws["next"], ws["idx"], sx, sy, h]
+        inputs = [T, flag, seeds_wp, ws["head"], ws["next"], ws["idx"], sx, sy, h]
         wp.launch(_fmm_kernel, dim=1, inputs=[*inputs, _BUCKETS_PER_VOXEL / h, 1, ws["overflow"]], device=device)
         if int(ws["overflow"].numpy()[0]):  # cannot happen (capacity bound); guard against silent garbage
             raise RuntimeError("fast marching queue overflow")

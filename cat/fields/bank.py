@@ -12,6 +12,8 @@ prefer "free space outside the window" can use ``inside`` to override (e.g. d = 
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -110,19 +112,33 @@ class FieldSample:
 
 
 class FieldBank:
-    """(n_fields, nx, ny, nz, 8) float32 tensor of fields sharing shape and voxel, with per-field origins."""
+    """(n_fields, nx, ny, nz, 8) float32 tensor of fields sharing shape and voxel, with per-field origins.
 
-    def __init__(self, data: torch.Tensor, origins: torch.Tensor, voxel: float, goals: torch.Tensor | None = None):
+    On the CPU the query is memory-bound gathers on one core per launch; ``num_threads`` > 1 splits the
+    envs over that many concurrent launches (Python threads; the launch releases the GIL)."""
+
+    def __init__(
+        self,
+        data: torch.Tensor,
+        origins: torch.Tensor,
+        voxel: float,
+        goals: torch.Tensor | None = None,
+        num_threads: int | None = None,
+    ):
         if data.ndim != 5 or data.shape[-1] != NUM_CHANNELS:
             raise ValueError(f"bank data must be (n_fields, nx, ny, nz, {NUM_CHANNELS}), got {tuple(data.shape)}")
         if origins.shape != (data.shape[0], 3):
             raise ValueError(f"origins must be ({data.shape[0]}, 3), got {tuple(origins.shape)}")
-        self.data = data.contiguous().float()
+        self.data = data.to(torch.float32).contiguous()
         self.origins = origins.to(self.data.device, torch.float32).contiguous()
         self.voxel = float(voxel)
         self.goals = None if goals is None else goals.to(self.data.device, torch.float32)
         self.device = self.data.device
         self._wp_device = get_device("cpu" if self.device.type == "cpu" else f"cuda:{self.device.index or 0}")
+        if num_threads is None:
+            num_threads = min(2, os.cpu_count() or 1)
+        self.num_threads = max(1, int(num_threads)) if self._wp_device.is_cpu else 1
+        self._pool = ThreadPoolExecutor(self.num_threads - 1) if self.num_threads > 1 else None
 
     @property
     def num_fields(self) -> int:
@@ -136,7 +152,9 @@ class FieldBank:
         return Grid(tuple(self.origins[i].tolist()), self.voxel, self.shape)
 
     @classmethod
-    def from_fields(cls, fields: list[Field], device: str | torch.device = "cpu") -> FieldBank:
+    def from_fields(
+        cls, fields: list[Field], device: str | torch.device = "cpu", num_threads: int | None = None
+    ) -> FieldBank:
         """Stack built fields (same shape and voxel) into a bank on ``device``."""
         if not fields:
             raise ValueError("FieldBank needs at least one field")
@@ -147,7 +165,7 @@ class FieldBank:
         data = torch.from_numpy(np.stack([f.data for f in fields])).to(device)
         origins = torch.tensor([f.grid.origin for f in fields], dtype=torch.float32, device=device)
         goals = torch.tensor(np.stack([f.goal for f in fields]), dtype=torch.float32, device=device)
-        return cls(data, origins, voxel, goals)
+        return cls(data, origins, voxel, goals, num_threads)
 
     def set_field(self, i: int, f: Field) -> None:
         """Replace field ``i`` in place (e.g. a rebuild for a clicked goal)."""
@@ -173,24 +191,41 @@ class FieldBank:
                 torch.empty((n, k), dtype=torch.bool, device=self.device),
             )
         nx, ny, nz = self.shape
-        wp.launch(
-            _query_kernel,
-            dim=n,
-            inputs=[
-                wp.from_torch(self.data.view(-1, NUM_CHANNELS), dtype=vec8),
-                wp.from_torch(self.origins, dtype=wp.vec3),
-                wp.from_torch(idx, dtype=wp.int32),
-                wp.from_torch(pts.view(-1, 3), dtype=wp.vec3),
-                k,
-                nx,
-                ny,
-                nz,
-                1.0 / self.voxel,
-                wp.from_torch(out.values.view(-1, NUM_CHANNELS), dtype=vec8),
-                wp.from_torch(out.inside.view(-1), dtype=wp.bool),
-            ],
-            device=self._wp_device,
-        )
+        bank = wp.from_torch(self.data.view(-1, NUM_CHANNELS), dtype=vec8)
+        origins = wp.from_torch(self.origins, dtype=wp.vec3)
+        values = out.values.view(-1, NUM_CHANNELS)
+        inside = out.inside.view(-1)
+
+        def launch(e0: int, e1: int) -> None:
+            if e1 <= e0:
+                return
+            wp.launch(
+                _query_kernel,
+                dim=e1 - e0,
+                inputs=[
+                    bank,
+                    origins,
+                    wp.from_torch(idx[e0:e1], dtype=wp.int32),
+                    wp.from_torch(pts[e0:e1].view(-1, 3), dtype=wp.vec3),
+                    k,
+                    nx,
+                    ny,
+                    nz,
+                    1.0 / self.voxel,
+                    wp.from_torch(values[e0 * k : e1 * k], dtype=vec8),
+                    wp.from_torch(inside[e0 * k : e1 * k], dtype=wp.bool),
+                ],
+                device=self._wp_device,
+            )
+
+        if self._pool is None or n < 256:
+            launch(0, n)
+        else:
+            bounds = [n * t // self.num_threads for t in range(self.num_threads + 1)]
+            futures = [self._pool.submit(launch, bounds[t], bounds[t + 1]) for t in range(1, self.num_threads)]
+            launch(bounds[0], bounds[1])
+            for fut in futures:
+                fut.result()
         return out
 
 

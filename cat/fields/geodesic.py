@@ -110,14 +110,35 @@ def _solve(T: wp.array(dtype=float), idx: int, sx: int, sy: int, h: float) -> fl
     return t
 
 
+@wp.func
+def _solve1(T: wp.array(dtype=float), idx: int, sx: int, sy: int, h: float) -> float:
+    """First-order upwind update (cheap): used for tentative values."""
+    b0 = wp.min(T[idx - sx], T[idx + sx])
+    b1 = wp.min(T[idx - sy], T[idx + sy])
+    b2 = wp.min(T[idx - 1], T[idx + 1])
+    lo = wp.min(b0, b1)
+    hi = wp.max(b0, b1)
+    c0 = wp.min(lo, b2)
+    c2 = wp.max(hi, b2)
+    c1 = wp.max(lo, wp.min(hi, b2))
+    t = c0 + h
+    if t > c1:
+        d = c0 - c1
+        t = 0.5 * (c0 + c1 + wp.sqrt(2.0 * h * h - d * d))
+        if t > c2:
+            s3 = c0 + c1 + c2
+            q3 = c0 * c0 + c1 * c1 + c2 * c2
+            t = (s3 + wp.sqrt(wp.max(s3 * s3 - 3.0 * (q3 - h * h), 0.0))) / 3.0
+    return t
+
+
 @wp.kernel
 def _fmm_kernel(
     T: wp.array(dtype=float),
     flag: wp.array(dtype=wp.uint8),
     seeds: wp.array(dtype=int),
     head: wp.array(dtype=int),
-    node_next: wp.array(dtype=int),
-    node_idx: wp.array(dtype=int),
+    node: wp.array(dtype=int),
     sx: int,
     sy: int,
     h: float,
@@ -127,13 +148,14 @@ def _fmm_kernel(
 ):
     """Whole fast march in one thread with a circular bucket queue (untidy priority queue).
 
-    ``T`` holds the current values (seeds exact and accepted on entry, INF where unknown); updates read
-    accepted and tentative neighbours alike (values only decrease, so tentative ones are upper bounds).
-    Bucket width is ``1/inv_delta`` (h/16): voxels are accepted in order of T up to that width, which
-    perturbs the result far below the discretisation error while making push/pop O(1). Entries are
-    lazy: a voxel re-pushed with a smaller value leaves a stale entry that is skipped when popped."""
+    ``T`` holds the current values (seeds exact and accepted on entry, INF where unknown). Tentative
+    values come from the cheap first-order update; when a voxel is accepted its final value is the
+    second-order update from its (by then accepted) neighbours. Bucket width is ``1/inv_delta`` (h/16):
+    voxels are accepted in order of T up to that width, which perturbs the result far below the
+    discretisation error while making push/pop O(1). Entries are lazy: a voxel re-pushed into a lower
+    bucket leaves a stale entry that is skipped when popped. 256 buckets (``& 255``)."""
     nb_buckets = head.shape[0]
-    cap = node_idx.shape[0]
+    cap = node.shape[0] // 2
     for b in range(nb_buckets):
         head[b] = -1
     top = int(0)
@@ -149,16 +171,19 @@ def _fmm_kernel(
         else:
             if live == 0:
                 break
-            while head[cb % nb_buckets] < 0:
+            while head[cb & 255] < 0:
                 cb += 1
-            slot = cb % nb_buckets
-            node = head[slot]
-            head[slot] = node_next[node]
+            slot = cb & 255
+            nd = head[slot]
+            head[slot] = node[2 * nd + 1]
             live -= 1
-            idx = node_idx[node]
+            idx = node[2 * nd]
             if flag[idx] != wp.uint8(_TRIAL):
                 continue
             flag[idx] = wp.uint8(_DONE)
+            if second_order != 0:
+                # final value: the second-order update from the (now mostly accepted) neighbours
+                T[idx] = wp.min(T[idx], _solve(T, idx, sx, sy, h))
         for nb in range(6):
             off = int(1)
             if nb < 2:
@@ -169,26 +194,25 @@ def _fmm_kernel(
                 off = -off
             m = idx + off
             fm = flag[m]
-            if fm == wp.uint8(_DONE) and second_order != 0:
-                # idx is the second upwind voxel of m + off: refresh it with the second-order term
-                m = m + off
-                fm = flag[m]
-                if fm != wp.uint8(_TRIAL):
-                    continue
             if fm == wp.uint8(_FAR_STATE) or fm == wp.uint8(_TRIAL):
-                tn = _solve(T, m, sx, sy, h)
-                if tn < T[m]:
-                    if top >= cap:
-                        overflow[0] = 1
-                        return
+                tn = _solve1(T, m, sx, sy, h)
+                told = T[m]
+                if tn < told:
                     T[m] = tn
-                    flag[m] = wp.uint8(_TRIAL)
-                    slot = wp.clamp(int(tn * inv_delta), cb, cb + nb_buckets - 1) % nb_buckets
-                    node_idx[top] = m
-                    node_next[top] = head[slot]
-                    head[slot] = top
-                    top += 1
-                    live += 1
+                    kb = wp.clamp(int(tn * inv_delta), cb, cb + nb_buckets - 1)
+                    # a tentative voxel whose bucket does not change keeps its queue entry (the
+                    # order inside a bucket is arbitrary anyway): no new node
+                    if fm == wp.uint8(_FAR_STATE) or kb < wp.max(int(told * inv_delta), cb):
+                        if top >= cap:
+                            overflow[0] = 1
+                            return
+                        flag[m] = wp.uint8(_TRIAL)
+                        slot = kb & 255
+                        node[2 * top] = m
+                        node[2 * top + 1] = head[slot]
+                        head[slot] = top
+                        top += 1
+                        live += 1
 
 
 @wp.kernel
@@ -287,7 +311,7 @@ def geodesic_padded_wp(
     if method == "fmm":
         ws = _FmmWorkspace.get(n, device)
         seeds_wp = wp.array(seeds_p.astype(np.int32), dtype=int, device=device)
-        inputs = [T, flag, seeds_wp, ws["head"], ws["next"], ws["idx"], sx, sy, h]
+        inputs = [T, flag, seeds_wp, ws["head"], ws["node"], sx, sy, h]
         wp.launch(_fmm_kernel, dim=1, inputs=[*inputs, _BUCKETS_PER_VOXEL / h, 1, ws["overflow"]], device=device)
         if int(ws["overflow"].numpy()[0]):  # cannot happen (capacity bound); guard against silent garbage
             raise RuntimeError("fast marching queue overflow")
@@ -319,8 +343,7 @@ class _FmmWorkspace:
             cap = 6 * n + 1  # a voxel is pushed at most once per accepted neighbour
             ws = {
                 "head": wp.empty(_NUM_BUCKETS, dtype=int, device=device),
-                "next": wp.empty(cap, dtype=int, device=device),
-                "idx": wp.empty(cap, dtype=int, device=device),
+                "node": wp.empty(2 * cap, dtype=int, device=device),
                 "overflow": wp.zeros(1, dtype=int, device=device),
             }
             cls._cache = {key: ws}

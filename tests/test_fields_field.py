@@ -110,3 +110,24 @@ def test_bad_inputs_raise():
         build_field(occ, GRID, (np.nan, 0.0, 0.5))
     with pytest.raises(ValueError, match="empty"):
         build_field(trimesh.Trimesh(), GRID, GOAL)
+
+
+def test_concurrent_builds_do_not_interfere():
+    """Scratch buffers are per thread: builds from two threads give the single-threaded results."""
+    import threading
+
+    occ = _box_occ(GRID)
+    goals = [(2.0, -0.5, 0.75), (2.0, 0.5, 0.75)]
+    ref = [build_field(occ, GRID, g).data for g in goals]
+    got: dict = {}
+
+    def job(i: int) -> None:
+        for r in range(3):
+            got[(i, r)] = build_field(occ, GRID, goals[i]).data
+
+    threads = [threading.Thread(target=job, args=(i,)) for i in range(2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert len(got) == 6 and all(np.array_equal(v, ref[i]) for (i, _), v in got.items())

@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import os
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 import warp as wp
 
@@ -18,3 +22,23 @@ def to_wp(a, dtype, device) -> wp.array:
     """Numpy array → Warp array (C-contiguous copy of the right dtype)."""
     np_dtype = {wp.float32: np.float32, wp.int32: np.int32, wp.uint8: np.uint8}[dtype]
     return wp.array(np.ascontiguousarray(a, dtype=np_dtype), dtype=dtype, device=device)
+
+
+_POOL: ThreadPoolExecutor | None = None
+
+
+def run_concurrently(*tasks: Callable[[], object]) -> list:
+    """Run callables concurrently: the first in the calling thread, the others in a small thread pool.
+
+    Warp CPU launches release the GIL, so two single-core launches use two cores. Exceptions propagate."""
+    global _POOL
+    if len(tasks) == 1:
+        return [tasks[0]()]
+    if _POOL is None:
+        _POOL = ThreadPoolExecutor(max_workers=max(1, min(4, (os.cpu_count() or 2) - 1)))
+    futures = [_POOL.submit(t) for t in tasks[1:]]
+    try:
+        first = tasks[0]()
+    finally:
+        rest = [f.result() for f in futures]
+    return [first, *rest]

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import json
 import logging
-import threading
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -18,7 +17,7 @@ import warp as wp
 
 from cat.fields import geodesic as geo_mod
 from cat.fields import sdf as sdf_mod
-from cat.fields._wp import get_device, to_wp
+from cat.fields._wp import get_device, run_concurrently, to_wp
 from cat.fields.config import FieldCfg
 from cat.fields.grid import Grid
 
@@ -76,6 +75,7 @@ def _sdf_grad(sdf: wp.array3d(dtype=float), i: int, j: int, k: int, h: float) ->
 def _field_kernel(
     sdf: wp.array3d(dtype=float),
     geo: wp.array(dtype=float),
+    i_start: int,
     h: float,
     eta: float,
     xi: float,
@@ -85,8 +85,9 @@ def _field_kernel(
     out: wp.array4d(dtype=float),
     potential: wp.array3d(dtype=float),
 ):
-    """One thread per (i, j) row: U, F = −η∇geo − U_rep'(d)∇d, ∇d and the extended geodesic."""
-    i, j = wp.tid()
+    """One thread per (i, j) row (i from ``i_start``): U, F = −η∇geo − U_rep'(d)∇d, ∇d, extended geodesic."""
+    ii, j = wp.tid()
+    i = ii + i_start
     ny = sdf.shape[1]
     nz = sdf.shape[2]
     pz = nz + 4
@@ -244,35 +245,30 @@ def build_field(
         occ_wp = to_wp(occ, wp.uint8, dev)
         sdf_wp = wp.empty(grid.shape, dtype=float, device=dev)
         if dev.is_cpu:
-            # both solvers are single-core Warp launches (ctypes releases the GIL): overlap them
+            # both solvers are single-core Warp launches that release the GIL: overlap them
             _load_modules(dev)
-            err: list[BaseException] = []
-
-            def _edt() -> None:
-                try:
-                    sdf_mod.sdf_from_occupancy_wp(occ_wp, grid, sdf_wp)
-                except BaseException as e:  # re-raised in the caller
-                    err.append(e)
-
-            th = threading.Thread(target=_edt)
-            th.start()
-            try:
-                geo_wp = geo_mod.geodesic_padded_wp(free_np, grid, goal, dev, cfg.goal_init_radius, method)
-            finally:
-                th.join()
-            if err:
-                raise err[0]
+            geo_wp = run_concurrently(
+                lambda: geo_mod.geodesic_padded_wp(free_np, grid, goal, dev, cfg.goal_init_radius, method),
+                lambda: sdf_mod.sdf_from_occupancy_wp(occ_wp, grid, sdf_wp),
+            )[0]
         else:
             sdf_mod.sdf_from_occupancy_wp(occ_wp, grid, sdf_wp)
             geo_wp = geo_mod.geodesic_padded_wp(free_np, grid, goal, dev, cfg.goal_init_radius, method)
     out = wp.empty((*grid.shape, NUM_CHANNELS), dtype=float, device=dev)
     pot = wp.empty(grid.shape, dtype=float, device=dev)
-    wp.launch(
-        _field_kernel,
-        dim=grid.shape[:2],
-        inputs=[sdf_wp, geo_wp, h, cfg.eta, cfg.xi, cfg.d0, cfg.d_min, GEO_FILL, out, pot],
-        device=dev,
-    )
+    nx = grid.shape[0]
+    parts = 2 if dev.is_cpu and nx >= 16 else 1
+
+    def launch(p: int) -> None:
+        i0, i1 = nx * p // parts, nx * (p + 1) // parts
+        wp.launch(
+            _field_kernel,
+            dim=(i1 - i0, grid.shape[1]),
+            inputs=[sdf_wp, geo_wp, i0, h, cfg.eta, cfg.xi, cfg.d0, cfg.d_min, GEO_FILL, out, pot],
+            device=dev,
+        )
+
+    run_concurrently(*[lambda p=p: launch(p) for p in range(parts)])
     geo = geo_mod.unpad(geo_wp.numpy(), grid)
     geo = np.where(geo >= 1.0e19, np.inf, geo).astype(np.float32)
     return Field(grid, goal, out.numpy(), geo, pot.numpy(), cfg)

@@ -20,6 +20,7 @@ Blocked voxels (obstacles) and free voxels that the front never reaches are ``+i
 from __future__ import annotations
 
 import logging
+import threading
 
 import numpy as np
 import warp as wp
@@ -333,12 +334,13 @@ def geodesic_padded_wp(
 class _FmmWorkspace:
     """Bucket-queue storage, cached per (padded size, device)."""
 
-    _cache: dict = {}
+    _local = threading.local()  # per thread: concurrent builds must not share scratch arrays
 
     @classmethod
     def get(cls, n: int, device) -> dict:
         key = (n, str(device))
-        ws = cls._cache.get(key)
+        cache = getattr(cls._local, "cache", {})
+        ws = cache.get(key)
         if ws is None:
             cap = 6 * n + 1  # a voxel is pushed at most once per accepted neighbour
             ws = {
@@ -346,7 +348,7 @@ class _FmmWorkspace:
                 "node": wp.empty(2 * cap, dtype=int, device=device),
                 "overflow": wp.zeros(1, dtype=int, device=device),
             }
-            cls._cache = {key: ws}
+            cls._local.cache = {key: ws}  # keep only the latest shape
         return ws
 
 

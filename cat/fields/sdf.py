@@ -17,6 +17,7 @@ Sign convention: d > 0 in free space, d < 0 inside obstacles, |d| in metres.
 from __future__ import annotations
 
 import logging
+import threading
 
 import numpy as np
 import trimesh
@@ -201,19 +202,20 @@ def _edt_pass_kernel(
 class _EdtWorkspace:
     """Scratch arrays for the EDT, cached per (shape, device) so rebuilds do not reallocate."""
 
-    _cache: dict = {}
+    _local = threading.local()  # per thread: concurrent builds must not share scratch arrays
 
     @classmethod
     def get(cls, shape: tuple[int, int, int], device) -> dict:
         key = (shape, str(device))
-        ws = cls._cache.get(key)
+        cache = getattr(cls._local, "cache", {})
+        ws = cache.get(key)
         if ws is None:
             nx, ny, nz = shape
             rows = max(nx, ny) * nz
             ws = {name: wp.empty(shape, dtype=float, device=device) for name in ("a_out", "a_in", "b_out", "b_in")}
             ws["v"] = wp.empty(rows * (max(nx, ny) + 2), dtype=int, device=device)
             ws["z"] = wp.empty(rows * (max(nx, ny) + 2), dtype=float, device=device)
-            cls._cache = {key: ws}  # keep only the latest shape
+            cls._local.cache = {key: ws}  # keep only the latest shape
         return ws
 
 

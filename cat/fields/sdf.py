@@ -191,12 +191,23 @@ def _edt_pass_kernel(
         base = r * nz + s
         stride = ny * nz
     w = (r * nz + s) * (n + 2)
+    # the inside transform is positive only at occupied voxels: rows without any are all zero
+    has_inside = int(0)
+    for t in range(n):
+        if f_in[base + t * stride] > 0.0:
+            has_inside = 1
+            break
     if axis == 1:
         _envelope(f_out, g_out, base, stride, n, v, z, w)
-        _envelope(f_in, g_in, base, stride, n, v, z, w)
+        if has_inside != 0:
+            _envelope(f_in, g_in, base, stride, n, v, z, w)
+        else:
+            for t in range(n):
+                g_in[base + t * stride] = 0.0
     else:
         _envelope_signed(f_out, base, stride, n, v, z, w, occ, wp.uint8(0), 1.0, voxel, sdf)
-        _envelope_signed(f_in, base, stride, n, v, z, w, occ, wp.uint8(1), -1.0, voxel, sdf)
+        if has_inside != 0:
+            _envelope_signed(f_in, base, stride, n, v, z, w, occ, wp.uint8(1), -1.0, voxel, sdf)
 
 
 class _EdtWorkspace:

@@ -218,7 +218,10 @@ class FieldBank:
                 device=self._wp_device,
             )
 
-        if self._pool is None or n < 256:
+        if self._wp_device.is_cuda:  # run on torch's current stream (no implicit sync, no race)
+            with wp.ScopedStream(wp.stream_from_torch(self.device)):
+                launch(0, n)
+        elif self._pool is None or n < 256:
             launch(0, n)
         else:
             bounds = [n * t // self.num_threads for t in range(self.num_threads + 1)]

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from cat.fields import Field, FieldCfg, Grid, build_field
+from cat.fields import Field, FieldCfg, Grid, build_field, build_fields
 
 GRID = Grid((-0.5, -1.0, 0.0), 0.04, (75, 50, 38))
 GOAL = (2.0, 0.0, 0.75)
@@ -131,3 +131,15 @@ def test_concurrent_builds_do_not_interfere():
     for t in threads:
         t.join()
     assert len(got) == 6 and all(np.array_equal(v, ref[i]) for (i, _), v in got.items())
+
+
+def test_build_fields_many_goals_equals_single_builds():
+    occ = _box_occ(GRID)
+    goals = [(2.0, y, 0.75) for y in (-0.6, -0.2, 0.2)]
+    many = build_fields(occ, GRID, goals)
+    assert len(many) == 3
+    for g, f in zip(goals, many, strict=True):
+        ref = build_field(occ, GRID, g)
+        assert np.allclose(f.goal, g) and np.array_equal(f.data, ref.data)
+    with pytest.raises(ValueError, match="inside an obstacle"):
+        build_fields(occ, GRID, [GOAL, (1.0, 0.0, 0.75)])

@@ -7,7 +7,7 @@
 
 from cat.fields.bank import FieldBank, FieldSample
 from cat.fields.config import FieldCfg
-from cat.fields.field import CHANNELS, Field, build_field
+from cat.fields.field import CHANNELS, Field, build_field, build_fields
 from cat.fields.geodesic import geodesic_distance
 from cat.fields.grid import Grid
 from cat.fields.humanoid_pf import field_reward, humanoid_pf, log_c3, priority_weights, vmf_log_likelihood
@@ -21,6 +21,7 @@ __all__ = [
     "FieldSample",
     "Grid",
     "build_field",
+    "build_fields",
     "field_reward",
     "geodesic_distance",
     "humanoid_pf",

@@ -219,6 +219,38 @@ def _check_goal(goal) -> np.ndarray:
     return g
 
 
+def _sdf_and_free(obstacles, grid: Grid, dev) -> tuple[wp.array, np.ndarray, wp.array | None]:
+    """SDF (Warp) and free mask (numpy) of a mesh or occupancy; the occupancy SDF is left to the caller
+    (returned as the uint8 occupancy array to transform) so it can overlap with a fast march."""
+    if isinstance(obstacles, trimesh.Trimesh):
+        sdf_wp = sdf_mod.sdf_from_mesh_wp(obstacles, grid, dev)
+        return sdf_wp, mesh_free_mask(sdf_wp.numpy(), grid), None
+    occ = sdf_mod.check_occupancy(obstacles, grid)
+    return wp.empty(grid.shape, dtype=float, device=dev), occ == 0, to_wp(occ, wp.uint8, dev)
+
+
+def _assemble(sdf_wp: wp.array, geo_wp: wp.array, grid: Grid, goal, cfg: FieldCfg, dev, parts: int) -> Field:
+    """Potential, force and channels from SDF and geodesic (``parts`` concurrent launches on the CPU)."""
+    out = wp.empty((*grid.shape, NUM_CHANNELS), dtype=float, device=dev)
+    pot = wp.empty(grid.shape, dtype=float, device=dev)
+    nx = grid.shape[0]
+    parts = parts if dev.is_cpu and nx >= 16 else 1
+
+    def launch(p: int) -> None:
+        i0, i1 = nx * p // parts, nx * (p + 1) // parts
+        wp.launch(
+            _field_kernel,
+            dim=(i1 - i0, grid.shape[1]),
+            inputs=[sdf_wp, geo_wp, i0, grid.voxel, cfg.eta, cfg.xi, cfg.d0, cfg.d_min, GEO_FILL, out, pot],
+            device=dev,
+        )
+
+    run_concurrently(*[lambda p=p: launch(p) for p in range(parts)])
+    geo = geo_mod.unpad(geo_wp.numpy(), grid)
+    geo = np.where(geo >= 1.0e19, np.inf, geo).astype(np.float32)
+    return Field(grid, np.asarray(goal, dtype=np.float64), out.numpy(), geo, pot.numpy(), cfg)
+
+
 def build_field(
     obstacles,
     grid: Grid,
@@ -234,41 +266,49 @@ def build_field(
     cfg = cfg or FieldCfg()
     goal = _check_goal(goal)
     dev = get_device(device)
-    h = grid.voxel
-    if isinstance(obstacles, trimesh.Trimesh):
-        sdf_wp = sdf_mod.sdf_from_mesh_wp(obstacles, grid, dev)
-        free_np = mesh_free_mask(sdf_wp.numpy(), grid)
-        geo_wp = geo_mod.geodesic_padded_wp(free_np, grid, goal, dev, cfg.goal_init_radius, method)
+    sdf_wp, free_np, occ_wp = _sdf_and_free(obstacles, grid, dev)
+
+    def march() -> wp.array:
+        return geo_mod.geodesic_padded_wp(free_np, grid, goal, dev, cfg.goal_init_radius, method)
+
+    if occ_wp is None:
+        geo_wp = march()
+    elif dev.is_cpu:
+        # both solvers are single-core Warp launches that release the GIL: overlap them
+        _load_modules(dev)
+        geo_wp = run_concurrently(march, lambda: sdf_mod.sdf_from_occupancy_wp(occ_wp, grid, sdf_wp))[0]
     else:
-        occ = sdf_mod.check_occupancy(obstacles, grid)
-        free_np = occ == 0
-        occ_wp = to_wp(occ, wp.uint8, dev)
-        sdf_wp = wp.empty(grid.shape, dtype=float, device=dev)
-        if dev.is_cpu:
-            # both solvers are single-core Warp launches that release the GIL: overlap them
-            _load_modules(dev)
-            geo_wp = run_concurrently(
-                lambda: geo_mod.geodesic_padded_wp(free_np, grid, goal, dev, cfg.goal_init_radius, method),
-                lambda: sdf_mod.sdf_from_occupancy_wp(occ_wp, grid, sdf_wp),
-            )[0]
-        else:
-            sdf_mod.sdf_from_occupancy_wp(occ_wp, grid, sdf_wp)
-            geo_wp = geo_mod.geodesic_padded_wp(free_np, grid, goal, dev, cfg.goal_init_radius, method)
-    out = wp.empty((*grid.shape, NUM_CHANNELS), dtype=float, device=dev)
-    pot = wp.empty(grid.shape, dtype=float, device=dev)
-    nx = grid.shape[0]
-    parts = 2 if dev.is_cpu and nx >= 16 else 1
+        sdf_mod.sdf_from_occupancy_wp(occ_wp, grid, sdf_wp)
+        geo_wp = march()
+    return _assemble(sdf_wp, geo_wp, grid, goal, cfg, dev, parts=2)
 
-    def launch(p: int) -> None:
-        i0, i1 = nx * p // parts, nx * (p + 1) // parts
-        wp.launch(
-            _field_kernel,
-            dim=(i1 - i0, grid.shape[1]),
-            inputs=[sdf_wp, geo_wp, i0, h, cfg.eta, cfg.xi, cfg.d0, cfg.d_min, GEO_FILL, out, pot],
-            device=dev,
-        )
 
-    run_concurrently(*[lambda p=p: launch(p) for p in range(parts)])
-    geo = geo_mod.unpad(geo_wp.numpy(), grid)
-    geo = np.where(geo >= 1.0e19, np.inf, geo).astype(np.float32)
-    return Field(grid, goal, out.numpy(), geo, pot.numpy(), cfg)
+def build_fields(
+    obstacles,
+    grid: Grid,
+    goals,
+    cfg: FieldCfg | None = None,
+    device: str | None = None,
+    method: str = "auto",
+) -> list[Field]:
+    """Fields of one scene for several goals (a training bank): the SDF is computed once, and on the
+    CPU two goals are marched concurrently. Same errors as :func:`build_field` (for any goal)."""
+    cfg = cfg or FieldCfg()
+    goals = [_check_goal(g) for g in goals]
+    dev = get_device(device)
+    sdf_wp, free_np, occ_wp = _sdf_and_free(obstacles, grid, dev)
+    if occ_wp is not None:
+        sdf_mod.sdf_from_occupancy_wp(occ_wp, grid, sdf_wp)
+    for g in goals:  # fail fast, before any march
+        geo_mod.goal_seeds(free_np, grid, g, cfg.goal_init_radius)
+    _load_modules(dev)
+
+    def one(g: np.ndarray) -> Field:
+        geo_wp = geo_mod.geodesic_padded_wp(free_np, grid, g, dev, cfg.goal_init_radius, method)
+        return _assemble(sdf_wp, geo_wp, grid, g, cfg, dev, parts=1)
+
+    step = 2 if dev.is_cpu else 1
+    fields: list[Field] = []
+    for i in range(0, len(goals), step):
+        fields += run_concurrently(*[lambda g=g: one(g) for g in goals[i : i + step]])
+    return fields

@@ -143,3 +143,12 @@ def test_build_fields_many_goals_equals_single_builds():
         assert np.allclose(f.goal, g) and np.array_equal(f.data, ref.data)
     with pytest.raises(ValueError, match="inside an obstacle"):
         build_fields(occ, GRID, [GOAL, (1.0, 0.0, 0.75)])
+
+
+def test_point_cloud_obstacles():
+    box = trimesh.creation.box((0.2, 0.3, 0.4))
+    box.apply_translation((1.0, 0.0, 0.75))
+    f = build_field(box.sample(20000, seed=0), GRID, GOAL)
+    assert np.isfinite(f.data).all()
+    c = GRID.world_to_index([1.0, 0.35, 0.75])
+    assert f.sdf[tuple(c)] > 0 and np.isinf(f.geodesic).sum() > 0

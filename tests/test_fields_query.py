@@ -106,3 +106,13 @@ def test_priority_weighting_resolves_symmetric_dilemma(fields):
             unweighted = unit[0, :, 1].mean()
             assert side * lateral > 0.02
             assert side * lateral > side * unweighted
+
+
+def test_query_rejects_bad_field_index_and_survives_nan(fields):
+    bank = FieldBank.from_fields(fields)
+    pts = torch.zeros(2, 13, 3)
+    with pytest.raises(IndexError):
+        bank.query(torch.tensor([0, 2], dtype=torch.int32), pts)
+    pts[0, 0] = float("nan")
+    s = bank.query(torch.tensor([0, 1], dtype=torch.int32), pts)
+    assert not s.inside[0, 0] and torch.isfinite(s.values).all()

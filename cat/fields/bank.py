@@ -56,6 +56,8 @@ def _query_kernel(
     for l in range(links):
         t = e * links + l
         u = (points[t] - org) * inv_voxel
+        if not (wp.isfinite(u[0]) and wp.isfinite(u[1]) and wp.isfinite(u[2])):
+            u = wp.vec3(-1.0, -1.0, -1.0)  # NaN/inf point: grid corner value, inside = False
         inside[t] = (
             u[0] >= 0.0
             and u[1] >= 0.0
@@ -177,7 +179,10 @@ class FieldBank:
             self.goals[i] = torch.tensor(f.goal, dtype=torch.float32, device=self.device)
 
     def query(self, field_idx: torch.Tensor, points: torch.Tensor, out: FieldSample | None = None) -> FieldSample:
-        """Trilinear values of all channels at ``points`` (N, K, 3) in fields ``field_idx`` (N,)."""
+        """Trilinear values of all channels at ``points`` (N, K, 3) in fields ``field_idx`` (N,).
+
+        Non-finite points get the value at the grid's first voxel and ``inside`` False. On the CPU a
+        field index out of range raises IndexError (on CUDA it is the caller's job: no host sync here)."""
         if points.ndim != 3 or points.shape[-1] != 3:
             raise ValueError(f"points must be (N, K, 3), got {tuple(points.shape)}")
         n, k = points.shape[:2]
@@ -185,6 +190,10 @@ class FieldBank:
             raise ValueError(f"field_idx must be ({n},), got {tuple(field_idx.shape)}")
         pts = points.to(self.device, torch.float32).contiguous()
         idx = field_idx.to(self.device, torch.int32).contiguous()
+        if self.device.type == "cpu" and n > 0:  # an out-of-range field index would read foreign memory
+            lo, hi = int(idx.min()), int(idx.max())
+            if lo < 0 or hi >= self.num_fields:
+                raise IndexError(f"field_idx out of range [0, {self.num_fields}): min {lo}, max {hi}")
         if out is None:
             out = FieldSample(
                 torch.empty((n, k, NUM_CHANNELS), dtype=torch.float32, device=self.device),

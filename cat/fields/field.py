@@ -225,6 +225,9 @@ def _sdf_and_free(obstacles, grid: Grid, dev) -> tuple[wp.array, np.ndarray, wp.
     if isinstance(obstacles, trimesh.Trimesh):
         sdf_wp = sdf_mod.sdf_from_mesh_wp(obstacles, grid, dev)
         return sdf_wp, mesh_free_mask(sdf_wp.numpy(), grid), None
+    arr = np.asarray(obstacles)
+    if arr.ndim == 2 and arr.shape[1] == 3 and np.issubdtype(arr.dtype, np.floating):
+        obstacles = sdf_mod.occupancy_from_points(arr, grid)  # point cloud (live perception)
     occ = sdf_mod.check_occupancy(obstacles, grid)
     return wp.empty(grid.shape, dtype=float, device=dev), occ == 0, to_wp(occ, wp.uint8, dev)
 
@@ -259,7 +262,8 @@ def build_field(
     device: str | None = None,
     method: str = "auto",
 ) -> Field:
-    """Build HumanoidPF for ``goal`` from a ``trimesh.Trimesh`` or a boolean occupancy of ``grid.shape``.
+    """Build HumanoidPF for ``goal`` from a ``trimesh.Trimesh``, a boolean occupancy of ``grid.shape``
+    or an (M, 3) float point cloud (voxelised: a voxel containing a point is occupied).
 
     Raises ValueError for a goal outside the grid or inside an obstacle, a mismatched occupancy shape,
     an empty mesh or NaN input."""

@@ -35,6 +35,7 @@ PAD = 2
 """Solver arrays are padded by 2 blocked voxels per side: no bounds checks in the stencils."""
 _NUM_BUCKETS = 256
 _BUCKETS_PER_VOXEL = 16.0
+# voxel states (uint8 flag array): blocked (obstacle / padding), unknown, tentative (queued), accepted
 _BLOCKED = 0
 _FAR_STATE = 1
 _TRIAL = 2

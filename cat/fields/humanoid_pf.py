@@ -46,9 +46,9 @@ def humanoid_pf(
     """F_H = w0·w1·F/‖F‖ (N, K, 3); zero where ‖F‖ < eps (the goal itself)."""
     w0_default, w1 = priority_weights(grad_d, d, v, lam, root_index)
     w0 = w0_default if w0 is None else w0.to(F)
-    norm = F.norm(dim=-1, keepdim=True)
-    unit = torch.where(norm > eps, F / norm.clamp(min=eps), torch.zeros_like(F))
-    return (w0 * w1).unsqueeze(-1) * unit
+    norm = torch.linalg.vector_norm(F, dim=-1)
+    scale = torch.where(norm > eps, (w0 * w1) / norm.clamp(min=eps), 0.0)
+    return F * scale.unsqueeze(-1)
 
 
 def log_c3(kappa: torch.Tensor) -> torch.Tensor:
@@ -81,10 +81,12 @@ def field_reward(
 
     A link at rest (‖v‖ < eps) has v̂ = 0 and contributes log C_3(κ) (no direction preferred by it);
     a link with F_H = 0 has κ = 0 and contributes the uniform density −log 4π."""
-    fn = F_H.norm(dim=-1, keepdim=True)
-    mu = torch.where(fn > eps, F_H / fn.clamp(min=eps), torch.zeros_like(F_H))
-    kappa = (kappa_max * fn.squeeze(-1)).clamp(max=kappa_cap)
-    vn = v.norm(dim=-1, keepdim=True)
-    v_hat = torch.where(vn > eps, v / vn.clamp(min=eps), torch.zeros_like(v))
-    ll = vmf_log_likelihood(mu, kappa, v_hat)
+    fn = torch.linalg.vector_norm(F_H, dim=-1)
+    vn = torch.linalg.vector_norm(v, dim=-1)
+    kappa = (kappa_max * fn).clamp(max=kappa_cap)
+    # κ μᵀv̂ = κ (F_H·v) / (‖F_H‖‖v‖), zero when either vector vanishes
+    denom = fn * vn
+    ok = (fn > eps) & (vn > eps)
+    cos = torch.where(ok, (F_H * v).sum(-1) / denom.clamp(min=eps * eps), 0.0)
+    ll = log_c3(kappa) + kappa * cos
     return ll if per_link else ll.sum(-1)

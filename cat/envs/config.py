@@ -83,6 +83,7 @@ class RewardCfg:
     """Reward weights; a zero weight removes the term. Terms live in ``cat.envs.mdp.rewards``."""
 
     field_vmf: float = 0.05  # R_field, the paper's vMF log-likelihood (eq. R_field)
+    field_vmf_uniform_offset: bool = True  # add K log 4 pi so random motion scores ~0 (see rewards.field_vmf)
     track_velocity: float = 1.5
     track_heading: float = 0.5
     goal_proximity: float = 1.0

@@ -16,7 +16,7 @@ from rsl_rl.env import VecEnv
 from tensordict import TensorDict
 
 from cat.envs import field_source as fsrc
-from cat.envs._pf_compat import FieldCfg, humanoid_pf
+from cat.fields import FieldCfg, humanoid_pf
 from cat.envs.config import EnvCfg
 from cat.envs.math_utils import quat_rotate_inverse, rotate_yaw_inverse, yaw_from_quat, yaw_quat
 from cat.envs.mdp import observations as obs_terms
@@ -117,13 +117,14 @@ class TraversalEnv(VecEnv):
         self.reached_time = torch.full((n,), float("inf"), **f32)
         self.collided_ever = torch.zeros(n, dtype=torch.bool, device=dev)
         self.min_goal_dist = torch.zeros(n, **f32)
-        self.kappa_max = self.field_cfg.kappa_max
         k = len(r.query_links)
-        self.w0 = torch.full((k,), 0.5, **f32)
-        self.w0[0] = 1.0  # the root (pelvis) has priority (paper eq. w0); query_links[0] is the pelvis
+        self.w0 = torch.full((k,), self.field_cfg.w_other, **f32)
+        self.w0[0] = self.field_cfg.w_root  # the root (pelvis) has priority (paper eq. w0); query_links[0]
         self.field_obs_buf = torch.zeros(n, k, 7, **f32)
         self.field_refresh = max(1, round(1.0 / (self.cfg.field_obs.refresh_hz * self.dt)))
-        self.reward_names = [f.name for f in fields(self.cfg.rewards) if getattr(self.cfg.rewards, f.name) != 0.0]
+        self.reward_names = [
+            f.name for f in fields(self.cfg.rewards) if f.type == "float" and getattr(self.cfg.rewards, f.name) != 0.0
+        ]
         obs_cfg = self.cfg.observations
         self._obs_fns = {t: _term(obs_terms, t, "observation") for t in obs_cfg.actor + obs_cfg.privileged}
         for t in self.cfg.terminations.terms:

@@ -4,24 +4,31 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+import math
+
 import torch
 import torch.nn.functional as F
 
-from cat.envs._pf_compat import vmf_log_likelihood
+from cat.fields import field_reward
+
+LOG_4PI = math.log(4 * math.pi)
 
 if TYPE_CHECKING:
     from cat.envs.traversal_env import TraversalEnv
 
 
 def field_vmf(env: TraversalEnv) -> torch.Tensor:
-    """R_field = sum_k [log C_3(kappa_k) + kappa_k mu_k . v_k/|v_k|] (paper, eq. R_field)."""
-    fh = env.humanoid_pf
-    norm = fh.norm(dim=-1)
-    mu = fh / norm.unsqueeze(-1).clamp_min(1e-9)
-    kappa = env.kappa_max * norm
-    vel = env.state.link_vel
-    v_hat = vel / vel.norm(dim=-1, keepdim=True).clamp_min(1e-6)
-    return vmf_log_likelihood(mu, kappa, v_hat).sum(dim=-1)
+    """R_field = sum_k [log C_3(kappa_k) + kappa_k mu_k . v_k/|v_k|] (paper, eq. R_field), plus K log 4 pi.
+
+    The constant K log 4 pi (minus the log-density of a uniform direction) makes an uninformative motion score
+    0 instead of about -2.5 per link; without it the term is a large negative per-step constant that rewards
+    ending episodes early. It changes no gradient of the per-step reward (``RewardCfg.field_vmf_uniform_offset``).
+    """
+    fc = env.field_cfg
+    r = field_reward(env.humanoid_pf, env.state.link_vel, kappa_max=fc.kappa_max, kappa_cap=fc.kappa_cap)
+    if env.cfg.rewards.field_vmf_uniform_offset:
+        r = r + env.humanoid_pf.shape[1] * LOG_4PI
+    return r
 
 
 def track_velocity(env: TraversalEnv) -> torch.Tensor:

@@ -16,7 +16,6 @@ from rsl_rl.env import VecEnv
 from tensordict import TensorDict
 
 from cat.envs import field_source as fsrc
-from cat.fields import FieldCfg, humanoid_pf
 from cat.envs.config import EnvCfg
 from cat.envs.math_utils import quat_rotate_inverse, rotate_yaw_inverse, yaw_from_quat, yaw_quat
 from cat.envs.mdp import observations as obs_terms
@@ -31,6 +30,7 @@ from cat.envs.scene import (
     query_vel_sensor,
 )
 from cat.envs.sim import make_backend
+from cat.fields import FieldCfg, humanoid_pf
 
 log = logging.getLogger(__name__)
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import threading
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 
@@ -25,18 +26,28 @@ def to_wp(a, dtype, device) -> wp.array:
 
 
 _POOL: ThreadPoolExecutor | None = None
+_IN_POOL = threading.local()
+
+
+def _in_pool(task: Callable[[], object]) -> object:
+    _IN_POOL.active = True
+    try:
+        return task()
+    finally:
+        _IN_POOL.active = False
 
 
 def run_concurrently(*tasks: Callable[[], object]) -> list:
     """Run callables concurrently: the first in the calling thread, the others in a small thread pool.
 
-    Warp CPU launches release the GIL, so two single-core launches use two cores. Exceptions propagate."""
+    Warp CPU launches release the GIL, so two single-core launches use two cores. Exceptions propagate.
+    Called from inside a pool task it runs everything inline (no nested waits on the pool)."""
     global _POOL
-    if len(tasks) == 1:
-        return [tasks[0]()]
+    if len(tasks) == 1 or getattr(_IN_POOL, "active", False):
+        return [t() for t in tasks]
     if _POOL is None:
         _POOL = ThreadPoolExecutor(max_workers=max(1, min(4, (os.cpu_count() or 2) - 1)))
-    futures = [_POOL.submit(t) for t in tasks[1:]]
+    futures = [_POOL.submit(_in_pool, t) for t in tasks[1:]]
     try:
         first = tasks[0]()
     finally:

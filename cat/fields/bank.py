@@ -13,14 +13,13 @@ prefer "free space outside the window" can use ``inside`` to override (e.g. d = 
 from __future__ import annotations
 
 import os
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 import torch
 import warp as wp
 
-from cat.fields._wp import get_device
+from cat.fields._wp import get_device, run_concurrently
 from cat.fields.field import CHANNELS, NUM_CHANNELS, Field
 from cat.fields.grid import Grid
 
@@ -140,7 +139,6 @@ class FieldBank:
         if num_threads is None:
             num_threads = min(2, os.cpu_count() or 1)
         self.num_threads = max(1, int(num_threads)) if self._wp_device.is_cpu else 1
-        self._pool = ThreadPoolExecutor(self.num_threads - 1) if self.num_threads > 1 else None
 
     @property
     def num_fields(self) -> int:
@@ -230,14 +228,10 @@ class FieldBank:
         if self._wp_device.is_cuda:  # run on torch's current stream (no implicit sync, no race)
             with wp.ScopedStream(wp.stream_from_torch(self.device)):
                 launch(0, n)
-        elif self._pool is None or n < 256:
-            launch(0, n)
         else:
-            bounds = [n * t // self.num_threads for t in range(self.num_threads + 1)]
-            futures = [self._pool.submit(launch, bounds[t], bounds[t + 1]) for t in range(1, self.num_threads)]
-            launch(bounds[0], bounds[1])
-            for fut in futures:
-                fut.result()
+            parts = self.num_threads if n >= 256 else 1
+            bounds = [n * t // parts for t in range(parts + 1)]
+            run_concurrently(*[lambda t=t: launch(bounds[t], bounds[t + 1]) for t in range(parts)])
         return out
 
 

@@ -2,7 +2,7 @@
 """Field bank: many fields (scenes × goals) in one tensor, and the batched 13-link trilinear query.
 
 All fields of a bank share ``shape`` and ``voxel``; each has its own origin (and goal). Env ``e`` reads
-field ``field_idx[e]`` at its K link positions in one Warp kernel launch (one thread per point), on
+field ``field_idx[e]`` at its K link positions in one Warp kernel launch (one thread per env), on
 the device of the bank tensor; inputs and outputs are torch tensors aliased with ``wp.from_torch``.
 
 Out-of-grid rule: a point's continuous index is clamped to the span of voxel centres, i.e. it gets the

@@ -116,3 +116,13 @@ def test_query_rejects_bad_field_index_and_survives_nan(fields):
     pts[0, 0] = float("nan")
     s = bank.query(torch.tensor([0, 1], dtype=torch.int32), pts)
     assert not s.inside[0, 0] and torch.isfinite(s.values).all()
+
+
+def test_query_pf_combines_query_and_weights(fields):
+    bank = FieldBank.from_fields(fields)
+    pts = torch.tensor(LINKS + [0.3, 0.0, 0.78], dtype=torch.float32)[None].repeat(2, 1, 1)
+    vel = torch.randn(2, 13, 3)
+    idx = torch.tensor([0, 1], dtype=torch.int32)
+    s, FH = bank.query_pf(idx, pts, vel)
+    ref = humanoid_pf(s.force, s.grad_sdf, s.sdf, vel)
+    assert torch.allclose(FH, ref)

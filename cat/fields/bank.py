@@ -20,8 +20,10 @@ import torch
 import warp as wp
 
 from cat.fields._wp import get_device, run_concurrently
+from cat.fields.config import FieldCfg
 from cat.fields.field import CHANNELS, NUM_CHANNELS, Field
 from cat.fields.grid import Grid
+from cat.fields.humanoid_pf import humanoid_pf
 
 vec8 = wp.types.vector(length=NUM_CHANNELS, dtype=wp.float32)
 
@@ -233,6 +235,16 @@ class FieldBank:
             bounds = [n * t // parts for t in range(parts + 1)]
             run_concurrently(*[lambda t=t: launch(bounds[t], bounds[t + 1]) for t in range(parts)])
         return out
+
+    def query_pf(
+        self, field_idx: torch.Tensor, points: torch.Tensor, velocities: torch.Tensor, cfg: FieldCfg | None = None
+    ) -> tuple[FieldSample, torch.Tensor]:
+        """Query plus HumanoidPF at the links: (sample, F_H (N, K, 3)); link 0 is the root."""
+        cfg = cfg or FieldCfg()
+        s = self.query(field_idx, points)
+        w0 = torch.full((points.shape[1],), cfg.w_other, dtype=torch.float32, device=self.device)
+        w0[0] = cfg.w_root
+        return s, humanoid_pf(s.force, s.grad_sdf, s.sdf, velocities.to(s.values), w0, cfg.lam)
 
 
 __all__ = ["CHANNELS", "FieldBank", "FieldSample"]

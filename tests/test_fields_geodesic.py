@@ -100,3 +100,16 @@ def test_bad_goals_raise():
         geodesic_distance(occ, g, (np.nan, 0.1, 0.1))
     with pytest.raises(ValueError, match="method"):
         geodesic_distance(occ, g, (0.1, 0.1, 0.1), method="dijkstra")
+
+
+def test_iterative_solver_converges_on_typical_scene():
+    """The CUDA default (parallel relaxation) on a full typical scene, run on the CPU device."""
+    from cat.fields.scenes import TYPICAL_GOAL, TYPICAL_GRID, hurdle_crouch
+
+    occ = hurdle_crouch()
+    a = geodesic_distance(occ, TYPICAL_GRID, TYPICAL_GOAL, method="fmm")
+    b = geodesic_distance(occ, TYPICAL_GRID, TYPICAL_GOAL, method="iterative")
+    assert np.array_equal(np.isinf(a), np.isinf(b))
+    fin = np.isfinite(a)
+    diff = np.abs(a[fin] - b[fin])
+    assert diff.max() < 0.25 * TYPICAL_GRID.voxel and np.quantile(diff, 0.99) < 1e-3

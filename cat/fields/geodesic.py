@@ -9,7 +9,8 @@ distance, which removes the point-source error of the first steps. Two solvers s
 
 * ``"fmm"`` — fast marching in a *single* Warp thread with a circular bucket queue of width h/16
   (an "untidy" priority queue, Yatziv et al. 2006: O(1) push/pop instead of a heap's cache-missing
-  O(log N); measured 3–5× faster here at unchanged accuracy). The right choice on the CPU, where a Warp
+  O(log N); measured ~3× faster here at unchanged accuracy). Tentative values use the first-order
+  update, each accepted voxel gets the second-order one. The right choice on the CPU, where a Warp
   launch runs on one core anyway.
 * ``"iterative"`` — parallel Jacobi relaxation until no value changes (a fast-iterative-method style
   scheme), one thread per voxel; the choice on CUDA. Converges to the same values within float tolerance.

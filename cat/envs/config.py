@@ -126,7 +126,9 @@ class EnvCfg:
     task: str = "flat"
     num_envs: int = 64
     episode_length_s: float = 20.0
-    scene_dir: str | None = None  # folder of scenes (cat.terrain); None = flat ground
+    scene_dir: str | None = None  # folder of scene folders (scripts/gen_scenes.py); None: see scene_kind
+    scene_kind: str | None = None  # keep only scenes of this kind; with no scene_dir, build its typical variants
+    scene_variants: int = 10  # typical variants built when scene_dir is None (difficulty spread over [0, 1])
     action_clip: float = 1.0
     gait_freq: tuple[float, float] = (1.3, 1.5)  # gait clock frequency [Hz]
     command: CommandCfg = field(default_factory=CommandCfg)

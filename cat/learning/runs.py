@@ -29,10 +29,13 @@ def make_env(cfg: TrainCfg, num_envs: int | None = None) -> TraversalEnv:
     n = num_envs or cfg.num_envs or cfg.task.num_envs
     task = replace(cfg.task, num_envs=n)
     scenes = None
-    if task.scene_dir:
+    if task.scene_dir or task.scene_kind:
         from cat.envs.scene_set import SceneSet
 
-        scenes = SceneSet.from_dir(task.scene_dir, num_envs=n, device=cfg.sim.device)
+        if task.scene_dir:
+            scenes = SceneSet.from_dir(task.scene_dir, num_envs=n, device=cfg.sim.device, kind=task.scene_kind)
+        else:
+            scenes = SceneSet.typical(task.scene_kind, n, task.scene_variants, cfg.seed, device=cfg.sim.device)
     return TraversalEnv(task, sim=cfg.sim.backend, device=cfg.sim.device, scenes=scenes, seed=cfg.seed)
 
 

@@ -1,0 +1,170 @@
+"""A set of obstacle scenes for the env: tiled into one MuJoCo model, with a HumanoidPF bank per (scene, goal).
+
+All scenes live in every world, side by side on a grid of tiles (``tile_spacing`` apart); env ``i`` trains in
+scene ``i % num_scenes``, so one compiled model serves both backends and obstacles of other tiles are never
+reached. Fields come from the scene folders (``fields/goal_XX.npz``, written by ``scripts/gen_scenes.py``) or
+are built on load; their grid origins are shifted by the tile offset into the shared world frame.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import replace
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from cat.envs.field_source import FieldSample
+from cat.fields import Field, FieldBank, FieldCfg, Grid, build_fields
+from cat.terrain import Scene, typical_variants
+from cat.terrain.mujoco_export import add_obstacles_to_spec, convex_parts
+
+log = logging.getLogger(__name__)
+
+
+class SceneSetError(ValueError):
+    """Scenes that cannot be used together (none found, mismatched grids, unknown kind)."""
+
+
+class BankField:
+    """Field source over a ``FieldBank``: each env samples the field it was assigned at reset."""
+
+    def __init__(self, bank: FieldBank, num_envs: int):
+        self.bank = bank
+        self.field_idx = torch.zeros(num_envs, dtype=torch.long, device=bank.device)
+
+    def assign(self, env_ids: torch.Tensor, field_ids: torch.Tensor) -> None:
+        self.field_idx[env_ids.to(self.field_idx.device)] = field_ids.to(self.field_idx.device)
+
+    def sample(self, points: torch.Tensor, goals: torch.Tensor) -> FieldSample:
+        s = self.bank.query(self.field_idx, points)
+        return FieldSample(force=s.force, sdf=s.sdf, grad_sdf=s.grad_sdf)
+
+
+class SceneSet:
+    """Scenes + field bank + per-env episode sampling (start in the scene's start region, one of its goals)."""
+
+    def __init__(
+        self,
+        scenes: list[Scene],
+        fields: list[list[Field]],
+        num_envs: int,
+        device: str = "cpu",
+        tile_margin: float = 2.0,
+    ):
+        if not scenes:
+            raise SceneSetError("no scenes given")
+        shapes = {f.grid.shape for per_scene in fields for f in per_scene}
+        if len(shapes) != 1:
+            raise SceneSetError(f"scenes of one set need fields of one grid shape, got {sorted(shapes)}")
+        self.scenes, self.num_envs, self.device = scenes, num_envs, torch.device(device)
+        extent = max(float(np.max(s.bounds[1, :2] - s.bounds[0, :2])) for s in scenes)
+        self.tile_spacing = extent + tile_margin
+        cols = math.ceil(math.sqrt(len(scenes)))
+        # tile offset chosen so each scene's own frame is kept, shifted to its tile
+        self.offsets = np.array(
+            [[(i % cols) * self.tile_spacing, (i // cols) * self.tile_spacing, 0.0] for i in range(len(scenes))]
+        )
+        shifted = []
+        self.field_start = []
+        for s, off, per_scene in zip(scenes, self.offsets, fields, strict=True):
+            if len(per_scene) != len(s.goals):
+                raise SceneSetError(f"scene {s.kind!r} has {len(s.goals)} goals but {len(per_scene)} fields")
+            self.field_start.append(len(shifted))
+            for f in per_scene:
+                g = f.grid
+                origin = tuple(float(o + d) for o, d in zip(g.origin, off, strict=True))
+                shifted.append(replace(f, grid=Grid(origin, g.voxel, g.shape), goal=f.goal + off))
+        self.bank = FieldBank.from_fields(shifted, device=self.device)
+        self.scene_of_env = torch.arange(num_envs) % len(scenes)
+        self._goal_idx = torch.zeros(num_envs, dtype=torch.long)
+
+    # --- construction -------------------------------------------------------------------------------------
+    @classmethod
+    def from_dir(
+        cls,
+        path: str | Path,
+        num_envs: int,
+        device: str = "cpu",
+        kind: str | None = None,
+        field_cfg: FieldCfg | None = None,
+    ) -> SceneSet:
+        """Every scene folder (with ``scene.json``) under ``path``, optionally only those of ``kind``."""
+        root = Path(path)
+        if not root.is_dir():
+            raise SceneSetError(f"scene folder not found: {root}")
+        folders = sorted(p.parent for p in root.rglob("scene.json"))
+        scenes = [Scene.load(f) for f in folders]
+        keep = [i for i, s in enumerate(scenes) if kind is None or s.kind == kind]
+        if not keep:
+            kinds = sorted({s.kind for s in scenes})
+            raise SceneSetError(f"no scenes{' of kind ' + repr(kind) if kind else ''} under {root}; found: {kinds}")
+        scenes, folders = [scenes[i] for i in keep], [folders[i] for i in keep]
+        fields = [_scene_fields(s, f, field_cfg) for s, f in tqdm(list(zip(scenes, folders)), desc="fields")]
+        return cls(scenes, fields, num_envs, device)
+
+    @classmethod
+    def typical(
+        cls,
+        kind: str,
+        num_envs: int,
+        variants: int = 10,
+        seed: int = 0,
+        device: str = "cpu",
+        field_cfg: FieldCfg | None = None,
+    ) -> SceneSet:
+        """The paper's typical scenes of ``kind`` built on the fly (no dataset needed)."""
+        scenes = typical_variants(kind, variants, seed)
+        fields = [_scene_fields(s, None, field_cfg) for s in tqdm(scenes, desc=f"{kind} fields")]
+        return cls(scenes, fields, num_envs, device)
+
+    # --- env hooks ----------------------------------------------------------------------------------------
+    def add_to_spec(self, spec: mujoco.MjSpec) -> None:
+        """Add every scene's convex parts, shifted to its tile, under the ``obstacles`` body."""
+        for scene, off in zip(self.scenes, self.offsets, strict=True):
+            parts = [p.copy().apply_translation(off) for p in convex_parts(scene.mesh)]
+            add_obstacles_to_spec(spec, parts)
+
+    def field_source(self, device) -> BankField:
+        return BankField(self.bank, self.num_envs)
+
+    def sample_episode(self, env_ids: torch.Tensor, gen: torch.Generator):
+        """(start (k, 3), goal (k, 3), heading to the goal (k,)) in world coordinates for ``env_ids``."""
+        ids = env_ids.cpu()
+        k = len(ids)
+        start, goal = torch.zeros(k, 3), torch.zeros(k, 3)
+        for j, i in enumerate(ids.tolist()):
+            s_idx = int(self.scene_of_env[i])
+            scene, off = self.scenes[s_idx], self.offsets[s_idx]
+            lo, hi = scene.start_region
+            u = torch.rand(2, generator=gen).numpy()
+            start[j, :2] = torch.from_numpy(lo + u * (hi - lo) + off[:2])
+            g = int(torch.randint(len(scene.goals), (1,), generator=gen))
+            self._goal_idx[i] = g
+            goal[j] = torch.from_numpy(scene.goals[g] + off)
+        delta = goal[:, :2] - start[:, :2]
+        return start, goal, torch.atan2(delta[:, 1], delta[:, 0])
+
+    def field_ids(self, env_ids: torch.Tensor) -> torch.Tensor:
+        ids = env_ids.cpu()
+        starts = torch.tensor(self.field_start)[self.scene_of_env[ids]]
+        return starts + self._goal_idx[ids]
+
+    def mesh_for_env(self, env_id: int):
+        s_idx = int(self.scene_of_env[env_id])
+        return self.scenes[s_idx].mesh.copy().apply_translation(self.offsets[s_idx])
+
+
+def _scene_fields(scene: Scene, folder: Path | None, cfg: FieldCfg | None) -> list[Field]:
+    """Precomputed fields of a scene folder when complete, else built from its occupancy now."""
+    if folder is not None:
+        files = [Scene.fields_dir(folder) / f"goal_{i:02d}.npz" for i in range(len(scene.goals))]
+        if all(f.is_file() for f in files):
+            return [Field.load(f) for f in files]
+        log.info("%s: building %d goal fields (not precomputed)", folder, len(scene.goals))
+    g = scene.grid()
+    return build_fields(scene.occupancy(), Grid(g.origin, g.voxel, g.shape), scene.goals, cfg)

@@ -104,7 +104,8 @@ class SceneSet:
             kinds = sorted({s.kind for s in scenes})
             raise SceneSetError(f"no scenes{' of kind ' + repr(kind) if kind else ''} under {root}; found: {kinds}")
         scenes, folders = [scenes[i] for i in keep], [folders[i] for i in keep]
-        fields = [_scene_fields(s, f, field_cfg) for s, f in tqdm(list(zip(scenes, folders, strict=True)), desc="fields")]
+        pairs = list(zip(scenes, folders, strict=True))
+        fields = [_scene_fields(s, f, field_cfg) for s, f in tqdm(pairs, desc="fields")]
         return cls(scenes, fields, num_envs, device)
 
     @classmethod

@@ -47,21 +47,25 @@ class PhysicsBackend(ABC):
             for i in range(model.nsensor)
         }
 
-    # --- state views (N, ...) --------------------------------------------------------------------------
+    # --- state views (N, ...): backends set ``_qpos``, ``_qvel``, ``_sens`` to torch views of their state ----
+    _qpos: torch.Tensor
+    _qvel: torch.Tensor
+    _sens: torch.Tensor
+
     @property
-    @abstractmethod
     def qpos(self) -> torch.Tensor:
         """(N, nq) generalized positions after the last step."""
+        return self._qpos
 
     @property
-    @abstractmethod
     def qvel(self) -> torch.Tensor:
         """(N, nv) generalized velocities after the last step."""
+        return self._qvel
 
     @property
-    @abstractmethod
     def sensordata(self) -> torch.Tensor:
         """(N, nsensordata) sensor readings (see the module docstring for their timing)."""
+        return self._sens
 
     def sensor(self, name: str) -> torch.Tensor:
         """(N, dim) view of one named sensor."""

@@ -33,13 +33,13 @@ class MujocoBackend(PhysicsBackend):
         self.nstate, self._qadr, self._vadr = state_layout(model)
         n, nu, ns = num_envs, model.nu, model.nsensordata
         self._state = np.zeros((n, self.nstate))
-        self._sens = np.zeros((n, ns))
+        self._sens_np = np.zeros((n, ns))
         self._ctrl = np.zeros((n, decimation, nu))
         self._out_state = np.zeros((n, decimation, self.nstate))
         self._out_sens = np.zeros((n, decimation, ns))
         self._qpos = torch.from_numpy(self._state[:, self._qadr : self._qadr + model.nq])
         self._qvel = torch.from_numpy(self._state[:, self._vadr : self._vadr + model.nv])
-        self._sens_t = torch.from_numpy(self._sens)
+        self._sens = torch.from_numpy(self._sens_np)
 
         d = self._scratch
         mujoco.mj_resetData(model, d)
@@ -49,19 +49,7 @@ class MujocoBackend(PhysicsBackend):
         spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
         mujoco.mj_getState(model, d, self._state[0], spec)
         self._state[:] = self._state[0]
-        self._sens[:] = d.sensordata
-
-    @property
-    def qpos(self) -> torch.Tensor:
-        return self._qpos
-
-    @property
-    def qvel(self) -> torch.Tensor:
-        return self._qvel
-
-    @property
-    def sensordata(self) -> torch.Tensor:
-        return self._sens_t
+        self._sens_np[:] = d.sensordata
 
     def step(self, ctrl: torch.Tensor) -> None:
         self._ctrl[:] = ctrl.detach().to("cpu", torch.float64).numpy()[:, None, :]
@@ -76,7 +64,7 @@ class MujocoBackend(PhysicsBackend):
             sensordata=self._out_sens,
         )
         np.copyto(self._state, self._out_state[:, -1])
-        np.copyto(self._sens, self._out_sens[:, -1])
+        np.copyto(self._sens_np, self._out_sens[:, -1])
 
     def reset(self, env_ids: torch.Tensor, qpos: torch.Tensor, qvel: torch.Tensor) -> None:
         ids = as_index(env_ids)
@@ -93,7 +81,7 @@ class MujocoBackend(PhysicsBackend):
             d.qvel[:] = qvel_np[k]
             mujoco.mj_forward(m, d)
             mujoco.mj_getState(m, d, self._state[i], spec)
-            self._sens[i] = d.sensordata
+            self._sens_np[i] = d.sensordata
 
     # --- domain randomisation: per-world model copies ---------------------------------------------------
     def _world_models(self) -> list[mujoco.MjModel]:

@@ -192,18 +192,6 @@ class WarpBackend(PhysicsBackend):
 
     # --- state views ---------------------------------------------------------------------------------
     @property
-    def qpos(self) -> torch.Tensor:
-        return self._qpos
-
-    @property
-    def qvel(self) -> torch.Tensor:
-        return self._qvel
-
-    @property
-    def sensordata(self) -> torch.Tensor:
-        return self._sens
-
-    @property
     def overflow(self) -> torch.Tensor:
         """(N,) int32 mujoco_warp ``OverflowType`` bits per world since its last reset (sticky)."""
         return self._overflow

@@ -33,7 +33,7 @@ class AlgoCfg:
     actor_hidden_dims: list[int] = field(default_factory=lambda: [256, 128, 64])
     critic_hidden_dims: list[int] = field(default_factory=lambda: [512, 256, 128])
     activation: str = "elu"
-    init_noise_std: float = 1.0
+    init_noise_std: float = 0.3  # actions are increments of PD targets (0.5 rad per unit): keep early noise small
     obs_normalization: bool = True
     save_interval: int = 50
 

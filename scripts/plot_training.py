@@ -15,7 +15,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 PANELS = [
     ("Train/mean_reward", "mean episode return"),
     ("Train/mean_episode_length", "mean episode length [steps]"),
-    ("Metrics/fall_rate", "fall rate (ended episodes)"),
+    ("Metrics/reached_rate", "goal reached within 0.1 m (ended episodes)"),
     ("Metrics/distance_error", "distance error DE [m]"),
 ]
 

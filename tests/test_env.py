@@ -10,6 +10,7 @@ from tensordict import TensorDict
 
 from cat.envs.config import EnvCfg
 from cat.envs.math_utils import rotate_yaw_inverse
+from cat.envs.mdp.terminations import fallen
 from cat.envs.traversal_env import TraversalEnv
 
 
@@ -98,3 +99,14 @@ def test_unknown_term_names_are_rejected():
     cfg.terminations.terms = ["fallen", "tripped"]
     with pytest.raises(ValueError, match="unknown termination term 'tripped'"):
         TraversalEnv(cfg)
+
+
+def test_tilt_beyond_limit_terminates():
+    env = TraversalEnv(EnvCfg(num_envs=2), sim="mujoco", seed=0)
+    qpos, qvel = env.sim.qpos[:1].clone(), env.sim.qvel[:1].clone()
+    tilt = 1.2  # rad about x, pelvis kept high so only the tilt check can fire
+    qpos[0, 2] = 1.5
+    qpos[0, 3:7] = torch.tensor([math.cos(tilt / 2), math.sin(tilt / 2), 0.0, 0.0], dtype=qpos.dtype)
+    env.sim.reset(torch.tensor([0]), qpos, qvel)
+    env._update_state()
+    assert fallen(env).tolist() == [True, False]

@@ -107,7 +107,7 @@ class RewardCfg:
 class TerminationCfg:
     terms: list[str] = field(default_factory=lambda: ["fallen", "collided", "non_finite"])
     min_base_height: float = 0.35  # [m]
-    max_tilt: float = 1.0  # |projected gravity xy|, ~ sin of tilt
+    max_tilt: float = 1.0  # [rad] angle between the pelvis z axis and the vertical
     on_collision: bool = False  # end the episode on any robot-obstacle contact
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING
 
 import torch
@@ -13,7 +14,7 @@ if TYPE_CHECKING:
 def fallen(env: TraversalEnv) -> torch.Tensor:
     t = env.cfg.terminations
     low = env.state.root_pos[:, 2] < t.min_base_height
-    tilted = env.state.gravity[:, :2].norm(dim=-1) > t.max_tilt
+    tilted = env.state.gravity[:, 2] > -math.cos(t.max_tilt)  # projected gravity z = -cos(tilt)
     return low | tilted
 
 

@@ -28,7 +28,7 @@ class GoalField:
         self.eta = eta
         self.free_sdf = free_sdf
 
-    def sample(self, points: torch.Tensor, goals: torch.Tensor, env_ids: torch.Tensor | None = None) -> FieldSample:
+    def sample(self, points: torch.Tensor, goals: torch.Tensor) -> FieldSample:
         """``points`` (N, K, 3) world positions, ``goals`` (N, 3)."""
         delta = goals[:, None, :] - points
         force = self.eta * delta / delta.norm(dim=-1, keepdim=True).clamp_min(1e-6)

@@ -7,9 +7,8 @@ Observation groups: ``actor`` (deployable: IMU, joints, actions, goal, gait cloc
 
 from __future__ import annotations
 
-import logging
 import math
-from dataclasses import asdict, dataclass, fields
+from dataclasses import dataclass, fields
 
 import torch
 from rsl_rl.env import VecEnv
@@ -31,8 +30,6 @@ from cat.envs.scene import (
 )
 from cat.envs.sim import make_backend
 from cat.fields import FieldCfg, humanoid_pf
-
-log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -381,9 +378,6 @@ class TraversalEnv(VecEnv):
             batch_size=[self.num_envs],
             device=self.device,
         )
-
-    def cfg_dict(self) -> dict:
-        return asdict(self.cfg)
 
 
 def _term(module, name: str, kind: str):

@@ -2,15 +2,12 @@
 
 from __future__ import annotations
 
-import logging
 from dataclasses import dataclass
 
 import torch
 from tqdm import tqdm
 
 from cat.learning.runs import load_policy, load_run_config, make_env
-
-log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -51,21 +48,20 @@ def play(cfg: PlayCfg) -> PlayResult:
     bar = tqdm(total=cfg.episodes, desc="episodes", unit="ep")
     with torch.inference_mode():
         while len(returns) < cfg.episodes:
-            ended_success = None
             obs, rew, dones, extras = env.step(policy(obs))
             ret += rew
             if recorder is not None:
                 recorder.log_step(env)
             ids = dones.nonzero(as_tuple=False).flatten()
             if len(ids):
-                ended_success = extras["episode_end"]
+                ended = extras["episode_end"]
                 for j, i in enumerate(ids.tolist()):
                     if len(returns) >= cfg.episodes:
                         break
                     returns.append(float(ret[i]))
-                    success.append(bool(ended_success["success"][j]))
-                    de.append(float(ended_success["distance_error"][j]))
-                    coll.append(bool(ended_success["collided"][j]))
+                    success.append(bool(ended["success"][j]))
+                    de.append(float(ended["distance_error"][j]))
+                    coll.append(bool(ended["collided"][j]))
                     bar.update(1)
                 ret[ids] = 0.0
     bar.close()

@@ -10,13 +10,15 @@ import logging
 import sys
 
 from cat.learning.hydra_cfg import ConfigError, load_config
-from cat.learning.runs import CheckpointError, train
+from cat.learning.runs import CheckpointError, resume_config, train
 
 
 def main(argv: list[str]) -> int:
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     try:
         cfg = load_config(argv)
+        if cfg.resume:
+            cfg = resume_config(cfg.resume, argv)
         run_dir = train(cfg)
     except (ConfigError, CheckpointError, ValueError) as err:
         logging.getLogger("train").error("%s", err)

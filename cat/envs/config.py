@@ -13,8 +13,9 @@ class CommandCfg:
     goal_height: float = 0.75  # z of the goal point (about pelvis height) [m]
     start_xy_range: float = 1.0  # start offset U(-r, r) per axis (flat task; scenes use their start)
     start_yaw_range: float = 1.5708  # start yaw U(-r, r) relative to the goal direction [rad]
-    speed: float = 0.6  # commanded root speed along the field [m/s]
-    slow_radius: float = 0.3  # speed decays as (d/slow_radius)^3 inside this goal distance [m]
+    speed: float = 0.9  # commanded root speed along the field [m/s]: 2 m in ~2.5 s, well inside the 5 s trial
+    slow_radius: float = 0.4  # inside this goal distance the speed decays as (d/slow_radius)^slow_power [m]
+    slow_power: float = 1.0  # 1 = linear: arrives (0.4 m -> 0.1 m in ~0.6 s); 3 (the release) never gets within 0.1 m
 
 
 @dataclass
@@ -79,6 +80,20 @@ class PushCfg:
 
 
 @dataclass
+class RewardParamsCfg:
+    """Shape parameters of the reward terms (widths, heights, margins); the weights are in ``RewardCfg``."""
+
+    velocity_sigma: float = 0.25  # track_velocity: exp(-|v_xy - v_cmd|^2 / sigma) [m^2/s^2]
+    heading_clearance: float = 0.3  # track_heading only where every query link is this far from obstacles [m]
+    standing_speed: float = 0.05  # commands slower than this mean "stand": no heading term, both feet in stance [m/s]
+    proximity_scale: float = 0.3  # goal_proximity: exp(-d / scale) [m]
+    foot_clearance: float = 0.07  # feet_clearance: swing-foot target height [m]
+    knee_min: float = 0.2  # knee_straight: penalise knee angles below this [rad]
+    barrier_margin: float = 0.05  # sdf_barrier: softplus((margin - d) / width) at each query link [m]
+    barrier_width: float = 0.02  # [m]
+
+
+@dataclass
 class RewardCfg:
     """Reward weights; a zero weight removes the term. Terms live in ``cat.envs.mdp.rewards``."""
 
@@ -98,9 +113,10 @@ class RewardCfg:
     feet_clearance: float = -5.0
     feet_slip: float = -0.1
     knee_straight: float = -0.1
-    sdf_barrier: float = -0.2
-    collision: float = 0.0  # the "w/o R_field" baseline sets this negative
+    sdf_barrier: float = -2.0  # obstacle proximity at the 13 links (anticipatory; the release used -20 at 11 sites)
+    collision: float = -5.0  # per control step with robot-obstacle contact at any substep
     termination: float = -20.0
+    params: RewardParamsCfg = field(default_factory=RewardParamsCfg)
 
 
 @dataclass

@@ -28,8 +28,8 @@ class GoalField:
         self.eta = eta
         self.free_sdf = free_sdf
 
-    def sample(self, points: torch.Tensor, goals: torch.Tensor) -> FieldSample:
-        """``points`` (N, K, 3) world positions, ``goals`` (N, 3)."""
+    def sample(self, points: torch.Tensor, goals: torch.Tensor, env_ids: torch.Tensor | None = None) -> FieldSample:
+        """``points`` (n, K, 3) world positions, ``goals`` (n, 3) of all envs or of ``env_ids``."""
         delta = goals[:, None, :] - points
         force = self.eta * delta / delta.norm(dim=-1, keepdim=True).clamp_min(1e-6)
         sdf = torch.full(points.shape[:-1], self.free_sdf, dtype=points.dtype, device=points.device)

@@ -40,8 +40,10 @@ class BankField:
     def assign(self, env_ids: torch.Tensor, field_ids: torch.Tensor) -> None:
         self.field_idx[env_ids.to(self.field_idx.device)] = field_ids.to(self.field_idx.device)
 
-    def sample(self, points: torch.Tensor, goals: torch.Tensor) -> FieldSample:
-        s = self.bank.query(self.field_idx, points)
+    def sample(self, points: torch.Tensor, goals: torch.Tensor, env_ids: torch.Tensor | None = None) -> FieldSample:
+        """Fields at ``points`` (n, K, 3) of all envs, or of ``env_ids`` (goals are baked into the bank)."""
+        idx = self.field_idx if env_ids is None else self.field_idx[env_ids.to(self.field_idx.device)]
+        s = self.bank.query(idx, points)
         return FieldSample(force=s.force, sdf=s.sdf, grad_sdf=s.grad_sdf)
 
 

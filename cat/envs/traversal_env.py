@@ -15,6 +15,7 @@ from rsl_rl.env import VecEnv
 from tensordict import TensorDict
 
 from cat.envs import field_source as fsrc
+from cat.envs.field_source import FieldSample
 from cat.envs.config import EnvCfg
 from cat.envs.math_utils import quat_rotate_inverse, rotate_yaw_inverse, yaw_from_quat, yaw_quat
 from cat.envs.mdp import observations as obs_terms
@@ -107,7 +108,8 @@ class TraversalEnv(VecEnv):
         self.goals = torch.zeros(n, 3, **f32)
         self.phase = torch.zeros(n, **f32)
         self.gait_freq = torch.ones(n, **f32)
-        self.episode_length_buf = torch.zeros(n, dtype=torch.long, device=dev)
+        self.episode_length_buf = torch.zeros(n, dtype=torch.long, device=dev)  # the runner may randomise it
+        self.step_count = torch.zeros(n, dtype=torch.long, device=dev)  # control steps since this env's reset
         self.common_step = 0
         self.push_timer = torch.zeros(n, **f32)
         self.failed = torch.zeros(n, dtype=torch.bool, device=dev)
@@ -149,17 +151,18 @@ class TraversalEnv(VecEnv):
         self._i_collision = cols(COLLISION_SENSOR)[0] if COLLISION_SENSOR in s.sensors else None
         self._down = torch.tensor([0.0, 0.0, -1.0], device=self.device)
 
-    def _update_state(self) -> None:
+    def _read_state(self, ids: torch.Tensor | slice) -> SimState:
+        """Robot state of worlds ``ids`` from the backend's qpos / qvel / sensordata."""
         s = self.sim
-        qpos, qvel = s.qpos.to(torch.float32), s.qvel.to(torch.float32)
-        sens = s.sensordata.to(torch.float32)
+        qpos, qvel = s.qpos[ids].to(torch.float32), s.qvel[ids].to(torch.float32)
+        sens = s.sensordata[ids].to(torch.float32)
         quat = qpos[:, 3:7]
         link_pos, link_vel = sens[:, self._i_link_pos], sens[:, self._i_link_vel]
         if self._i_collision is None:
-            collision = torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
+            collision = torch.zeros(len(qpos), dtype=torch.bool, device=self.device)
         else:
             collision = sens[:, self._i_collision] > 0
-        self.state = SimState(
+        return SimState(
             root_pos=qpos[:, :3],
             root_quat=quat,
             root_lin_vel=qvel[:, :3],
@@ -176,19 +179,39 @@ class TraversalEnv(VecEnv):
             collision=collision,
         )
 
-    def _update_field(self) -> None:
-        """Field at the links now (for rewards) and the command velocity from F_H at the root."""
-        st = self.state
-        self.field = self.field_source.sample(st.link_pos, self.goals)
-        self.humanoid_pf = humanoid_pf(
-            self.field.force, self.field.grad_sdf, self.field.sdf, st.link_vel, self.w0, self.field_cfg.lam
-        )
-        self.goal_distance = (self.goals[:, :2] - st.root_pos[:, :2]).norm(dim=-1)
-        root_dir = self.humanoid_pf[:, 0, :2]
+    def _update_state(self, env_ids: torch.Tensor | None = None) -> None:
+        """Read the state of all worlds, or refresh only ``env_ids`` (after their reset)."""
+        if env_ids is None:
+            self.state = self._read_state(slice(None))
+            return
+        new = self._read_state(env_ids)
+        for f in fields(SimState):
+            getattr(self.state, f.name)[env_ids] = getattr(new, f.name)
+
+    def _update_field(self, env_ids: torch.Tensor | None = None) -> None:
+        """Field at the links now (for rewards) and the command velocity from F_H at the root.
+
+        With ``env_ids`` only those envs are re-queried (after their reset); the others keep this step's values.
+        """
+        ids = slice(None) if env_ids is None else env_ids
+        st, goals = self.state, self.goals[ids]
+        link_pos, link_vel, root_xy = st.link_pos[ids], st.link_vel[ids], st.root_pos[ids, :2]
+        field = self.field_source.sample(link_pos, goals, env_ids)
+        hpf = humanoid_pf(field.force, field.grad_sdf, field.sdf, link_vel, self.w0, self.field_cfg.lam)
+        dist = (goals[:, :2] - root_xy).norm(dim=-1)
+        root_dir = hpf[:, 0, :2]
         root_dir = root_dir / root_dir.norm(dim=-1, keepdim=True).clamp_min(1e-6)
         c = self.cfg.command
-        speed = c.speed * torch.clamp(self.goal_distance / c.slow_radius, max=1.0) ** 3
-        self.command_vel = root_dir * speed[:, None]
+        speed = c.speed * torch.clamp(dist / c.slow_radius, max=1.0) ** c.slow_power
+        cmd = root_dir * speed[:, None]
+        if env_ids is None:
+            self.field, self.humanoid_pf, self.goal_distance, self.command_vel = field, hpf, dist, cmd
+            return
+        for f in fields(FieldSample):
+            getattr(self.field, f.name)[env_ids] = getattr(field, f.name)
+        self.humanoid_pf[env_ids] = hpf
+        self.goal_distance[env_ids] = dist
+        self.command_vel[env_ids] = cmd
 
     def _refresh_field_obs(self, env_ids: torch.Tensor | None = None) -> None:
         if not self.cfg.field_obs.enabled:
@@ -215,6 +238,7 @@ class TraversalEnv(VecEnv):
         self.sim.step(self.targets)
 
         self.episode_length_buf += 1
+        self.step_count += 1
         self.phase = torch.remainder(self.phase + self.gait_freq * self.dt, 1.0)
         self._update_state()
         self._update_field()
@@ -256,7 +280,7 @@ class TraversalEnv(VecEnv):
 
     # --- episode bookkeeping -----------------------------------------------------------------------------
     def _track_success(self) -> None:
-        t = self.episode_length_buf.to(torch.float32) * self.dt
+        t = self.step_count.to(torch.float32) * self.dt
         self.collided_ever |= self.state.collision
         reached = (self.goal_distance < self.cfg.success.radius) & torch.isinf(self.reached_time)
         self.reached_time = torch.where(reached, t, self.reached_time)
@@ -268,7 +292,7 @@ class TraversalEnv(VecEnv):
         return ok & ~self.collided_ever[env_ids]
 
     def _episode_log(self, ids: torch.Tensor) -> dict:
-        length_s = (self.episode_length_buf[ids].to(torch.float32) * self.dt).clamp_min(self.dt)
+        length_s = (self.step_count[ids].to(torch.float32) * self.dt).clamp_min(self.dt)
         out = {f"Episode_Reward/{k}": (v[ids] / length_s).mean() for k, v in self.episode_sums.items()}
         out["Metrics/success_rate"] = self.episode_success(ids).float().mean()
         out["Metrics/reached_rate"] = torch.isfinite(self.reached_time[ids]).float().mean()
@@ -276,6 +300,14 @@ class TraversalEnv(VecEnv):
         out["Metrics/collision_rate"] = self.collided_ever[ids].float().mean()
         out["Metrics/fall_rate"] = self.failed[ids].float().mean()
         return out
+
+    # --- state a resumed training needs ---------------------------------------------------------------------
+    def training_state(self) -> dict:
+        """Env state that must survive a stop/resume of training (the difficulty curriculum, when on)."""
+        return {}
+
+    def load_training_state(self, state: dict) -> None:
+        """Restore what ``training_state`` returned."""
 
     # --- resets ------------------------------------------------------------------------------------------
     def reset_idx(self, env_ids: torch.Tensor) -> None:
@@ -315,6 +347,7 @@ class TraversalEnv(VecEnv):
         self.phase[env_ids] = uniform(0.0, 1.0, k)
         self.gait_freq[env_ids] = uniform(*self.cfg.gait_freq, k)
         self.episode_length_buf[env_ids] = 0
+        self.step_count[env_ids] = 0
         self.push_timer[env_ids] = uniform(*self.cfg.push.interval_s, k)
         self.reached_time[env_ids] = float("inf")
         self.collided_ever[env_ids] = False
@@ -323,8 +356,12 @@ class TraversalEnv(VecEnv):
             v[env_ids] = 0.0
         if self.scenes is not None:
             self.field_source.assign(env_ids, self.scenes.field_ids(env_ids))
-        self._update_state()
-        self._update_field()
+        if self.field is not None:
+            self._update_state(env_ids)
+            self._update_field(env_ids)
+        else:  # construction: first read of every world
+            self._update_state()
+            self._update_field()
         self.min_goal_dist[env_ids] = self.goal_distance[env_ids]
         self._refresh_field_obs(env_ids)
 

@@ -44,10 +44,11 @@ class TrainCfg:
     sim: SimCfg = field(default_factory=SimCfg)
     algo: AlgoCfg = field(default_factory=AlgoCfg)
     num_envs: int | None = None  # overrides task.num_envs when set
-    max_iterations: int = 1500
+    max_iterations: int = 1500  # total PPO iterations of the run (a resumed run continues up to this count)
+    max_minutes: float = 0.0  # > 0: stop cleanly after this much wall-clock, save, and resume later
     seed: int = 0
     init: str | None = None  # checkpoint whose policy/critic weights initialise this run
-    resume: str | None = None  # checkpoint to resume (optimizer + iteration), written to a new run folder
+    resume: str | None = None  # checkpoint to continue, in its own run folder (optimiser, iteration, RNG, curriculum)
     run_root: str = "runs"
     run_name: str = ""
 

@@ -13,12 +13,17 @@ class RerunLogWriter(LogWriter):
     """Scalars go to ``<log_dir>/metrics.rrd`` on an ``iteration`` timeline (open with ``rerun metrics.rrd``).
 
     The same scalars are appended to ``metrics.csv`` (iteration, tag, value) for plotting without a viewer
-    (``scripts/plot_training.py``).
+    (``scripts/plot_training.py``). A resumed run appends to the csv and records to the next free
+    ``metrics_<k>.rrd`` (open them together: ``rerun <run>/metrics*.rrd``).
     """
 
     def __init__(self, log_dir: str, recording_name: str = "cat_training", **_unused):
         os.makedirs(log_dir, exist_ok=True)
         self.path = os.path.join(log_dir, "metrics.rrd")
+        k = 0
+        while os.path.exists(self.path):
+            k += 1
+            self.path = os.path.join(log_dir, f"metrics_{k}.rrd")
         self.rec = rr.RecordingStream(recording_name)
         self.rec.save(self.path)
         self._csv = open(os.path.join(log_dir, "metrics.csv"), "a", buffering=1)  # noqa: SIM115

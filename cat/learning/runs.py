@@ -63,27 +63,111 @@ def load_run_config(checkpoint: str | os.PathLike) -> TrainCfg:
     return OmegaConf.to_object(OmegaConf.merge(schema, yaml.safe_load(cfg_file.read_text())))
 
 
+def resume_config(checkpoint: str | os.PathLike, overrides: list[str]) -> TrainCfg:
+    """The config of the run being resumed, with only the keys given on the command line changed.
+
+    Config-group choices (``task=``, ``sim=``, ``algo=``) cannot change on resume: the run keeps its own.
+    """
+    base = OmegaConf.structured(load_run_config(checkpoint))
+    dotlist = []
+    for item in overrides:
+        key, value = item.split("=", 1)
+        if key in ("task", "sim", "algo", "field"):
+            if key == "task" and value != base.task.task:
+                raise ValueError(f"resume={checkpoint} continues task {base.task.task!r}; drop task={value}")
+            continue
+        dotlist.append(item)
+    merged = OmegaConf.merge(base, OmegaConf.from_dotlist(dotlist))
+    merged.resume = str(checkpoint)
+    return OmegaConf.to_object(merged)
+
+
+class _BudgetReached(Exception):
+    """Raised from the logging hook once ``max_minutes`` is spent (after a complete iteration)."""
+
+
+def _stop_after_minutes(runner: OnPolicyRunner, minutes: float) -> None:
+    """Make ``runner.learn`` end after the first iteration that finishes past ``minutes`` of wall-clock.
+
+    The check rides on the logger's per-iteration call, which comes after the update and the iteration count
+    are final, so the state at the stop is a complete iteration that ``train`` then saves.
+    """
+    deadline = time.monotonic() + 60.0 * minutes
+    log_iteration = runner.logger.log
+
+    def log_then_check(*args, **kwargs):
+        log_iteration(*args, **kwargs)
+        if time.monotonic() >= deadline:
+            raise _BudgetReached
+
+    runner.logger.log = log_then_check
+
+
+def _training_state(env: TraversalEnv) -> dict:
+    """What a resumed run needs beyond rsl_rl's checkpoint: RNG streams (and the env's curriculum)."""
+    return {"torch_rng": torch.get_rng_state(), "env_rng": env.generator.get_state(), **env.training_state()}
+
+
+def _restore_training_state(env: TraversalEnv, infos: dict | None) -> None:
+    if not infos:
+        log.warning("checkpoint has no training state (RNG, curriculum): continuing from fresh streams")
+        return
+    torch.set_rng_state(infos["torch_rng"])
+    env.generator.set_state(infos["env_rng"])
+    env.load_training_state(infos)
+
+
 def train(cfg: TrainCfg) -> Path:
-    """Train PPO per ``cfg``; returns the run folder (config.yaml, model_*.pt, metrics.rrd)."""
+    """Train PPO per ``cfg``; returns the run folder (config.yaml, model_*.pt, metrics.rrd, metrics.csv).
+
+    ``cfg.resume`` continues that checkpoint's run in its own folder (iteration count, optimiser, normaliser,
+    RNG, curriculum) up to ``max_iterations`` in total; ``cfg.max_minutes`` > 0 stops after the iteration that
+    passes the budget and saves it, so one training can span several sittings.
+    """
     torch.manual_seed(cfg.seed)
     if cfg.sim.backend not in BACKENDS:
         raise ValueError(f"unknown sim backend {cfg.sim.backend!r}; valid: {', '.join(BACKENDS)}")
     for path in (cfg.init, cfg.resume):
         if path and not Path(path).is_file():
             raise CheckpointError(f"checkpoint not found: {path}")
-    run_dir = new_run_dir(cfg)
+    if cfg.resume:
+        run_dir = Path(cfg.resume).parent
+    else:
+        run_dir = new_run_dir(cfg)
     save_config(cfg, run_dir)
     log.info("run folder: %s", run_dir)
     env = make_env(cfg)
     runner = OnPolicyRunner(env, runner_cfg(cfg.algo), log_dir=str(run_dir), device=str(env.device))
     if cfg.resume:
-        runner.load(cfg.resume)
-        log.info("resumed from %s at iteration %d", cfg.resume, runner.current_learning_iteration)
+        _restore_training_state(env, runner.load(cfg.resume))
+        runner.current_learning_iteration += 1  # the checkpoint's iteration is complete
+        log.info("resumed %s at iteration %d", cfg.resume, runner.current_learning_iteration)
     elif cfg.init:
         runner.load(cfg.init, load_cfg={"actor": True, "critic": True}, strict=True)
         runner.current_learning_iteration = 0
         log.info("initialised weights from %s", cfg.init)
-    runner.learn(cfg.max_iterations, init_at_random_ep_len=True)
+    remaining = cfg.max_iterations - runner.current_learning_iteration
+    if remaining <= 0:
+        log.info(
+            "nothing to do: the run is at iteration %d of %d", runner.current_learning_iteration, cfg.max_iterations
+        )
+        return run_dir
+    save = runner.save
+    runner.save = lambda path, infos=None: save(path, infos=_training_state(env))
+    if cfg.max_minutes > 0:
+        _stop_after_minutes(runner, cfg.max_minutes)
+    try:
+        runner.learn(remaining, init_at_random_ep_len=not cfg.resume)
+    except _BudgetReached:
+        it = runner.current_learning_iteration
+        runner.save(str(run_dir / f"model_{it}.pt"))
+        runner.logger.stop_logging_writer()
+        log.info(
+            "max_minutes=%g reached: saved model_%d.pt; resume=%s continues",
+            cfg.max_minutes,
+            it,
+            run_dir / f"model_{it}.pt",
+        )
     return run_dir
 
 

@@ -33,20 +33,26 @@ def field_vmf(env: TraversalEnv) -> torch.Tensor:
 def track_velocity(env: TraversalEnv) -> torch.Tensor:
     """Root horizontal velocity tracks the field command (speed along F_H at the root)."""
     err = (env.state.root_lin_vel[:, :2] - env.command_vel).square().sum(dim=-1)
-    return torch.exp(-err / 0.25)
+    return torch.exp(-err / env.cfg.rewards.params.velocity_sigma)
 
 
 def track_heading(env: TraversalEnv) -> torch.Tensor:
-    """Face the commanded direction (only while the command is non-negligible)."""
+    """Face the commanded direction in open space; 1 (free) near obstacles, where side-stepping may be needed.
+
+    Gated off while any query link is within ``heading_clearance`` of an obstacle (side passes need the body
+    turned across the direction of travel) and while the command is slower than ``standing_speed``.
+    """
+    p = env.cfg.rewards.params
     cmd = env.command_vel
     speed = cmd.norm(dim=-1)
     heading = torch.stack((torch.cos(env.state.yaw), torch.sin(env.state.yaw)), dim=-1)
     cos = (heading * cmd).sum(dim=-1) / speed.clamp_min(1e-6)
-    return torch.where(speed > 0.05, cos, torch.ones_like(cos))
+    active = (speed > p.standing_speed) & (env.field.sdf.amin(dim=-1) > p.heading_clearance)
+    return torch.where(active, cos, torch.ones_like(cos))
 
 
 def goal_proximity(env: TraversalEnv) -> torch.Tensor:
-    return torch.exp(-env.goal_distance / 0.3)
+    return torch.exp(-env.goal_distance / env.cfg.rewards.params.proximity_scale)
 
 
 def alive(env: TraversalEnv) -> torch.Tensor:
@@ -87,7 +93,7 @@ def joint_limits(env: TraversalEnv) -> torch.Tensor:
 def _stance(env: TraversalEnv) -> torch.Tensor:
     """Phase-defined stance of (left, right) feet: left stands in the first half period."""
     s = torch.sin(2 * torch.pi * env.phase)
-    standing = env.command_vel.norm(dim=-1) < 0.05
+    standing = env.command_vel.norm(dim=-1) < env.cfg.rewards.params.standing_speed
     left, right = s >= 0, s < 0
     stance = torch.stack((left, right), dim=-1)
     return stance | standing[:, None]
@@ -99,11 +105,11 @@ def feet_phase_contact(env: TraversalEnv) -> torch.Tensor:
 
 
 def feet_clearance(env: TraversalEnv) -> torch.Tensor:
-    """Swing feet should lift to 7 cm (weighted by their horizontal speed)."""
+    """Swing feet should lift to ``params.foot_clearance`` (weighted by their horizontal speed)."""
     swing = ~_stance(env)
     z = env.state.foot_pos[..., 2]
     speed = env.state.foot_vel[..., :2].norm(dim=-1)
-    return ((z - 0.07).square() * speed * swing).sum(dim=-1)
+    return ((z - env.cfg.rewards.params.foot_clearance).square() * speed * swing).sum(dim=-1)
 
 
 def feet_slip(env: TraversalEnv) -> torch.Tensor:
@@ -113,12 +119,13 @@ def feet_slip(env: TraversalEnv) -> torch.Tensor:
 def knee_straight(env: TraversalEnv) -> torch.Tensor:
     """Penalise nearly straight knees (locked knees make stepping brittle)."""
     knees = env.state.joint_pos[:, env.knee_ids]
-    return (0.2 - knees).clamp_min(0).sum(dim=-1)
+    return (env.cfg.rewards.params.knee_min - knees).clamp_min(0).sum(dim=-1)
 
 
 def sdf_barrier(env: TraversalEnv) -> torch.Tensor:
-    """Soft barrier on the signed distance at the query links: sum_k softplus((0.05 - d_k) / 0.02)."""
-    return F.softplus((0.05 - env.field.sdf) / 0.02).sum(dim=-1)
+    """Soft barrier on the signed distance at the query links: sum_k softplus((margin - d_k) / width)."""
+    p = env.cfg.rewards.params
+    return F.softplus((p.barrier_margin - env.field.sdf) / p.barrier_width).sum(dim=-1)
 
 
 def collision(env: TraversalEnv) -> torch.Tensor:

@@ -15,8 +15,8 @@ from rsl_rl.env import VecEnv
 from tensordict import TensorDict
 
 from cat.envs import field_source as fsrc
-from cat.envs.field_source import FieldSample
 from cat.envs.config import EnvCfg
+from cat.envs.field_source import FieldSample
 from cat.envs.math_utils import quat_rotate_inverse, rotate_yaw_inverse, yaw_from_quat, yaw_quat
 from cat.envs.mdp import observations as obs_terms
 from cat.envs.mdp import rewards as rew_terms

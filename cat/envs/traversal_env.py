@@ -125,7 +125,9 @@ class TraversalEnv(VecEnv):
             f.name for f in fields(self.cfg.rewards) if f.type == "float" and getattr(self.cfg.rewards, f.name) != 0.0
         ]
         obs_cfg = self.cfg.observations
+        self.obs_groups = {"actor": list(obs_cfg.actor), "critic": list(obs_cfg.actor) + list(obs_cfg.privileged)}
         self._obs_fns = {t: _term(obs_terms, t, "observation") for t in obs_cfg.actor + obs_cfg.privileged}
+        self._mirror_map = None
         for t in self.cfg.terminations.terms:
             _term(term_terms, t, "termination")
         self.episode_sums = {name: torch.zeros(n, **f32) for name in self.reward_names}
@@ -300,6 +302,15 @@ class TraversalEnv(VecEnv):
         out["Metrics/collision_rate"] = self.collided_ever[ids].float().mean()
         out["Metrics/fall_rate"] = self.failed[ids].float().mean()
         return out
+
+    @property
+    def mirror_map(self):
+        """Left/right mirror of every observation group and the actions (``cat.envs.symmetry``), built once."""
+        if self._mirror_map is None:
+            from cat.envs.symmetry import MirrorMap
+
+            self._mirror_map = MirrorMap.of_env(self)
+        return self._mirror_map
 
     # --- state a resumed training needs ---------------------------------------------------------------------
     def training_state(self) -> dict:

@@ -36,6 +36,8 @@ class AlgoCfg:
     init_noise_std: float = 0.3  # actions are increments of PD targets (0.5 rad per unit): keep early noise small
     obs_normalization: bool = True
     save_interval: int = 50
+    symmetry_augment: bool = False  # add left/right mirrored samples to every PPO mini-batch (cat.envs.symmetry)
+    mirror_loss_coeff: float = 0.0  # > 0: also penalise disagreement between the policy and its mirror image
 
 
 @dataclass
@@ -51,6 +53,17 @@ class TrainCfg:
     resume: str | None = None  # checkpoint to continue, in its own run folder (optimiser, iteration, RNG, curriculum)
     run_root: str = "runs"
     run_name: str = ""
+
+
+def _symmetry_cfg(algo: AlgoCfg) -> dict[str, Any] | None:
+    if not algo.symmetry_augment and algo.mirror_loss_coeff <= 0:
+        return None
+    return {
+        "use_data_augmentation": algo.symmetry_augment,
+        "use_mirror_loss": algo.mirror_loss_coeff > 0,
+        "mirror_loss_coeff": algo.mirror_loss_coeff,
+        "data_augmentation_func": "cat.envs.symmetry:mirror_augment",
+    }
 
 
 def runner_cfg(algo: AlgoCfg) -> dict[str, Any]:
@@ -74,6 +87,7 @@ def runner_cfg(algo: AlgoCfg) -> dict[str, Any]:
             "max_grad_norm": algo.max_grad_norm,
             "desired_kl": algo.desired_kl,
             "schedule": algo.schedule,
+            "symmetry_cfg": _symmetry_cfg(algo),
         },
         "actor": {
             "class_name": "MLPModel",

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from cat.envs.curriculum import CurriculumCfg
+
 
 @dataclass
 class CommandCfg:
@@ -156,3 +158,4 @@ class EnvCfg:
     rewards: RewardCfg = field(default_factory=RewardCfg)
     terminations: TerminationCfg = field(default_factory=TerminationCfg)
     success: SuccessCfg = field(default_factory=SuccessCfg)
+    curriculum: CurriculumCfg = field(default_factory=CurriculumCfg)  # scene tasks only

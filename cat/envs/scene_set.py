@@ -132,6 +132,15 @@ class SceneSet:
             parts = [p.copy().apply_translation(off) for p in convex_parts(scene.mesh)]
             add_obstacles_to_spec(spec, parts)
 
+    @property
+    def difficulties(self) -> torch.Tensor:
+        """(num_scenes,) difficulty in [0, 1] of each scene (for the curriculum)."""
+        return torch.tensor([float(s.difficulty) for s in self.scenes])
+
+    def assign_scenes(self, env_ids: torch.Tensor, scene_ids: torch.Tensor) -> None:
+        """Move envs to other scenes (takes effect at their next ``sample_episode``)."""
+        self.scene_of_env[env_ids.cpu()] = scene_ids.cpu()
+
     def field_source(self, device) -> BankField:
         return BankField(self.bank, self.num_envs)
 

@@ -16,6 +16,7 @@ from tensordict import TensorDict
 
 from cat.envs import field_source as fsrc
 from cat.envs.config import EnvCfg
+from cat.envs.curriculum import DifficultyCurriculum
 from cat.envs.field_source import FieldSample
 from cat.envs.math_utils import quat_rotate_inverse, rotate_yaw_inverse, yaw_from_quat, yaw_quat
 from cat.envs.mdp import observations as obs_terms
@@ -80,6 +81,9 @@ class TraversalEnv(VecEnv):
         self.sim = make_backend(sim, model, self.num_envs, self.robot.decimation, device=device)
         self.device = self.sim.device
         self.field = None
+        self.curriculum = None
+        if scenes is not None and cfg.curriculum.enabled:
+            self.curriculum = DifficultyCurriculum(scenes.difficulties, self.num_envs, cfg.curriculum)
         self.field_source = (
             scenes.field_source(self.device)
             if scenes is not None
@@ -268,6 +272,9 @@ class TraversalEnv(VecEnv):
         done_ids = dones.nonzero(as_tuple=False).flatten()
         if len(done_ids) > 0:
             extras["log"] = self._episode_log(done_ids)
+            if self.curriculum is not None:
+                self.curriculum.update(done_ids, self.episode_success(done_ids))
+                extras["log"]["Curriculum/mean_level"] = self.curriculum.mean_level()
             extras["episode_end"] = {
                 "env_ids": done_ids,
                 "success": self.episode_success(done_ids),
@@ -315,10 +322,12 @@ class TraversalEnv(VecEnv):
     # --- state a resumed training needs ---------------------------------------------------------------------
     def training_state(self) -> dict:
         """Env state that must survive a stop/resume of training (the difficulty curriculum, when on)."""
-        return {}
+        return {} if self.curriculum is None else {"curriculum": self.curriculum.state_dict()}
 
     def load_training_state(self, state: dict) -> None:
         """Restore what ``training_state`` returned."""
+        if self.curriculum is not None and "curriculum" in state:
+            self.curriculum.load_state_dict(state["curriculum"])
 
     # --- resets ------------------------------------------------------------------------------------------
     def reset_idx(self, env_ids: torch.Tensor) -> None:
@@ -332,6 +341,8 @@ class TraversalEnv(VecEnv):
             return (lo + (hi - lo) * torch.rand(*shape, generator=g)).to(dev)
 
         if self.scenes is not None:
+            if self.curriculum is not None:
+                self.scenes.assign_scenes(env_ids, self.curriculum.pick_scenes(env_ids, g))
             start, goal, heading = self.scenes.sample_episode(env_ids, g)
             start, goal, heading = start.to(dev), goal.to(dev), heading.to(dev)
         else:

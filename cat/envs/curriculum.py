@@ -1,0 +1,73 @@
+"""Difficulty curriculum over a scene set (paper §III-B): each env climbs through difficulty levels.
+
+Scenes carry a difficulty in [0, 1] (typical variants and procedural scenes both do); ``num_levels`` equal
+bins of it are the levels. Each env has a level; at reset it draws one of the scenes of its level (or of the
+nearest lower level that has scenes). After an episode the level goes up on success and down on failure, so
+every env settles where it succeeds about half the time and moves on as the policy improves.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+
+@dataclass
+class CurriculumCfg:
+    enabled: bool = True  # False: env i always trains in scene i % num_scenes
+    num_levels: int = 5  # equal-width bins of scene difficulty in [0, 1]
+    start_level: int = 0  # level of every env at the start of training
+
+
+class DifficultyCurriculum:
+    """Per-env difficulty level, promoted after a success and demoted after a failure."""
+
+    def __init__(self, difficulties: torch.Tensor, num_envs: int, cfg: CurriculumCfg):
+        if cfg.num_levels < 1:
+            raise ValueError(f"curriculum.num_levels must be >= 1, got {cfg.num_levels}")
+        d = difficulties.detach().cpu().float().clamp(0.0, 1.0)
+        self.scene_level = torch.clamp((d * cfg.num_levels).long(), max=cfg.num_levels - 1)
+        self.num_levels = cfg.num_levels
+        present = torch.zeros(cfg.num_levels, dtype=torch.bool)
+        present[self.scene_level] = True
+        # level -> the level whose scenes it draws from: itself, else the nearest lower one with scenes
+        lowest = int(self.scene_level.min())
+        self._source = torch.empty(cfg.num_levels, dtype=torch.long)
+        last = lowest
+        for lvl in range(cfg.num_levels):
+            last = lvl if present[lvl] else last
+            self._source[lvl] = last
+        self.max_level = int(self.scene_level.max())
+        start = min(max(cfg.start_level, 0), self.max_level)
+        self.level = torch.full((num_envs,), start, dtype=torch.long)
+
+    def update(self, env_ids: torch.Tensor, success: torch.Tensor) -> None:
+        """Promote ``env_ids`` whose episode succeeded, demote the others."""
+        ids = env_ids.cpu()
+        step = torch.where(success.cpu(), 1, -1)
+        self.level[ids] = (self.level[ids] + step).clamp(0, self.max_level)
+
+    def pick_scenes(self, env_ids: torch.Tensor, gen: torch.Generator) -> torch.Tensor:
+        """One scene index per env, uniformly among the scenes of its (source) level."""
+        src = self._source[self.level[env_ids.cpu()]]
+        out = torch.empty(len(src), dtype=torch.long)
+        for lvl in src.unique().tolist():
+            rows = (src == lvl).nonzero(as_tuple=False).flatten()
+            pool = (self.scene_level == lvl).nonzero(as_tuple=False).flatten()
+            out[rows] = pool[torch.randint(len(pool), (len(rows),), generator=gen)]
+        return out
+
+    def mean_level(self) -> float:
+        return float(self.level.float().mean())
+
+    def state_dict(self) -> dict:
+        return {"level": self.level.clone()}
+
+    def load_state_dict(self, state: dict) -> None:
+        level = state["level"]
+        if level.shape != self.level.shape:
+            raise ValueError(
+                f"curriculum state for {level.shape[0]} envs cannot resume a run of {len(self.level)} envs"
+            )
+        self.level = level.clone().clamp(0, self.max_level)

@@ -1,0 +1,60 @@
+"""Difficulty curriculum: promotion / demotion on constructed outcomes, level-respecting scene draws, and its
+state surviving a stop/resume of training."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from cat.envs.config import EnvCfg
+from cat.envs.curriculum import CurriculumCfg, DifficultyCurriculum
+from cat.envs.scene_set import SceneSet
+from cat.envs.traversal_env import TraversalEnv
+
+DIFF = torch.tensor([0.0, 0.1, 0.5, 0.9, 1.0])  # 5 levels -> scene levels 0, 0, 2, 4, 4
+
+
+def test_promote_on_success_demote_on_failure():
+    cur = DifficultyCurriculum(DIFF, num_envs=3, cfg=CurriculumCfg(num_levels=5))
+    assert cur.scene_level.tolist() == [0, 0, 2, 4, 4] and cur.max_level == 4
+    ids = torch.tensor([0, 1, 2])
+    for _ in range(3):
+        cur.update(ids, torch.tensor([True, False, True]))
+    assert cur.level.tolist() == [3, 0, 3]  # env 1 is clamped at 0
+    cur.update(torch.tensor([2]), torch.tensor([False]))
+    assert cur.level.tolist() == [3, 0, 2]
+    for _ in range(5):
+        cur.update(torch.tensor([0]), torch.tensor([True]))
+    assert cur.level[0] == 4  # clamped at the hardest level present
+    assert cur.mean_level() == pytest.approx(2.0)
+
+
+def test_scene_draws_respect_levels():
+    cur = DifficultyCurriculum(DIFF, num_envs=600, cfg=CurriculumCfg(num_levels=5))
+    cur.level[:200], cur.level[200:400], cur.level[400:] = 0, 3, 4
+    picks = cur.pick_scenes(torch.arange(600), torch.Generator().manual_seed(0))
+    assert set(picks[:200].tolist()) == {0, 1}  # level 0: both easy scenes
+    assert set(picks[200:400].tolist()) == {2}  # level 3 has no scene: the nearest lower level (2)
+    assert set(picks[400:].tolist()) == {3, 4}
+
+
+def test_state_round_trip_and_bad_resume():
+    cur = DifficultyCurriculum(DIFF, num_envs=4, cfg=CurriculumCfg(num_levels=5, start_level=2))
+    assert cur.level.tolist() == [2, 2, 2, 2]
+    cur.update(torch.arange(4), torch.tensor([True, True, False, False]))
+    other = DifficultyCurriculum(DIFF, num_envs=4, cfg=CurriculumCfg(num_levels=5))
+    other.load_state_dict(cur.state_dict())
+    assert other.level.tolist() == cur.level.tolist()
+    with pytest.raises(ValueError, match="cannot resume a run of 5 envs"):
+        DifficultyCurriculum(DIFF, num_envs=5, cfg=CurriculumCfg()).load_state_dict(cur.state_dict())
+
+
+def test_env_moves_envs_between_scenes_by_level():
+    scenes = SceneSet.typical("hurdle-crouch", num_envs=4, variants=2)  # difficulties 0 and 1
+    env = TraversalEnv(EnvCfg(num_envs=4, scene_kind="hurdle-crouch"), sim="mujoco", scenes=scenes, seed=1)
+    assert env.curriculum is not None and env.curriculum.scene_level.tolist() == [0, 4]
+    assert (scenes.scene_of_env == 0).all()  # everyone starts at level 0
+    env.curriculum.level[:] = 4
+    env.reset_idx(torch.arange(4))
+    assert (scenes.scene_of_env == 1).all()
+    assert env.training_state()["curriculum"]["level"].tolist() == [4, 4, 4, 4]

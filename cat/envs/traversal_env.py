@@ -22,6 +22,7 @@ from cat.envs.math_utils import quat_rotate_inverse, rotate_yaw_inverse, yaw_fro
 from cat.envs.mdp import observations as obs_terms
 from cat.envs.mdp import rewards as rew_terms
 from cat.envs.mdp import terminations as term_terms
+from cat.envs.mdp.commands import command_speed
 from cat.envs.robot import RobotCfg, home_qpos, load_robot_cfg
 from cat.envs.scene import (
     COLLISION_SENSOR,
@@ -207,9 +208,7 @@ class TraversalEnv(VecEnv):
         dist = (goals[:, :2] - root_xy).norm(dim=-1)
         root_dir = hpf[:, 0, :2]
         root_dir = root_dir / root_dir.norm(dim=-1, keepdim=True).clamp_min(1e-6)
-        c = self.cfg.command
-        speed = c.speed * torch.clamp(dist / c.slow_radius, max=1.0) ** c.slow_power
-        cmd = root_dir * speed[:, None]
+        cmd = root_dir * command_speed(dist, self.cfg.command)[:, None]
         if env_ids is None:
             self.field, self.humanoid_pf, self.goal_distance, self.command_vel = field, hpf, dist, cmd
             return

@@ -328,6 +328,45 @@ class TraversalEnv(VecEnv):
         if self.curriculum is not None and "curriculum" in state:
             self.curriculum.load_state_dict(state["curriculum"])
 
+    _SNAPSHOT = (
+        "targets", "actions", "prev_actions", "goals", "phase", "gait_freq", "episode_length_buf", "step_count",
+        "push_timer", "reached_time", "collided_ever", "min_goal_dist", "field_obs_buf", "kp", "kd", "dr_scales",
+    )  # fmt: skip
+
+    def get_state(self) -> dict:
+        """Everything that makes the next step of every env what it would have been: physics, episode
+        bookkeeping, scene/goal assignment and the current observations (an exact training resume)."""
+        snap = {name: getattr(self, name).clone() for name in self._SNAPSHOT}
+        snap["episode_sums"] = {k: v.clone() for k, v in self.episode_sums.items()}
+        snap["common_step"] = self.common_step
+        snap["sim"] = self.sim.get_state()
+        snap["obs"] = self.obs_buf.clone()
+        if self.scenes is not None:
+            snap["scene_of_env"] = self.scenes.scene_of_env.clone()
+            snap["goal_idx"] = self.scenes._goal_idx.clone()
+            snap["field_idx"] = self.field_source.field_idx.clone()
+        return snap
+
+    def set_state(self, snap: dict) -> None:
+        """Restore ``get_state``'s snapshot (same task and number of envs)."""
+        if snap["targets"].shape != self.targets.shape:
+            raise ValueError(f"env snapshot of {snap['targets'].shape[0]} envs cannot restore {self.num_envs} envs")
+        for name in self._SNAPSHOT:
+            getattr(self, name).copy_(snap[name])
+        for k, v in snap["episode_sums"].items():
+            self.episode_sums[k].copy_(v)
+        self.common_step = snap["common_step"]
+        if self.cfg.domain_rand.enabled:
+            self._apply_dr(torch.arange(self.num_envs), self.dr_scales)
+        self.sim.set_state(snap["sim"])
+        if self.scenes is not None:
+            self.scenes.scene_of_env.copy_(snap["scene_of_env"])
+            self.scenes._goal_idx.copy_(snap["goal_idx"])
+            self.field_source.field_idx.copy_(snap["field_idx"])
+        self._update_state()
+        self._update_field()
+        self.obs_buf = snap["obs"].clone()
+
     # --- resets ------------------------------------------------------------------------------------------
     def reset_idx(self, env_ids: torch.Tensor) -> None:
         k = len(env_ids)
@@ -392,13 +431,19 @@ class TraversalEnv(VecEnv):
         def u(rng, *shape):
             return rng[0] + (rng[1] - rng[0]) * torch.rand(*shape, generator=g)
 
-        kp_s, kd_s, m_s = u(dr.kp_scale, k, 1), u(dr.kd_scale, k, 1), u(dr.mass_scale, k, 1)
+        scales = torch.cat((u(dr.kp_scale, k, 1), u(dr.kd_scale, k, 1), u(dr.mass_scale, k, 1)), dim=-1)
+        self._apply_dr(env_ids, scales)
+
+    def _apply_dr(self, env_ids: torch.Tensor, scales: torch.Tensor) -> None:
+        """Set worlds' PD gains and body masses from per-env (kp, kd, mass) scale factors (k, 3)."""
+        scales = scales.to("cpu", torch.float32, copy=True)
+        kp_s, kd_s, m_s = scales[:, :1], scales[:, 1:2], scales[:, 2:3]
         base_kp, base_kd = torch.tensor(self.robot.kp), torch.tensor(self.robot.kd)
         self.sim.set_actuator_gains(env_ids, base_kp * kp_s, base_kd * kd_s)
-        self.sim.set_body_mass_scale(env_ids, m_s.expand(k, self.sim.model.nbody))
+        self.sim.set_body_mass_scale(env_ids, m_s.expand(len(env_ids), self.sim.model.nbody))
         self.kp[env_ids] = (base_kp * kp_s).to(self.device, torch.float32)
         self.kd[env_ids] = (base_kd * kd_s).to(self.device, torch.float32)
-        self.dr_scales[env_ids] = torch.cat((kp_s, kd_s, m_s), dim=-1).to(self.device, torch.float32)
+        self.dr_scales[env_ids] = scales.to(self.device)
 
     def _apply_pushes(self) -> None:
         p = self.cfg.push

@@ -108,13 +108,36 @@ def _training_state(env: TraversalEnv) -> dict:
     return {"torch_rng": torch.get_rng_state(), "env_rng": env.generator.get_state(), **env.training_state()}
 
 
-def _restore_training_state(env: TraversalEnv, infos: dict | None) -> None:
+def env_snapshot_path(checkpoint: str | os.PathLike) -> Path:
+    """``model_<it>.pt`` -> ``env_<it>.pt``: the env snapshot saved with it (not needed to play)."""
+    ckpt = Path(checkpoint)
+    return ckpt.with_name(ckpt.name.replace("model_", "env_", 1))
+
+
+def _save_with_state(runner: OnPolicyRunner, env: TraversalEnv, save) -> None:
+    """Checkpoints also carry RNG + curriculum (in ``infos``) and an env snapshot file beside them."""
+
+    def save_all(path: str, infos: dict | None = None) -> None:
+        save(path, infos=_training_state(env))
+        torch.save(env.get_state(), env_snapshot_path(path))
+
+    runner.save = save_all
+
+
+def _restore_training_state(runner: OnPolicyRunner, env: TraversalEnv, checkpoint: str, infos: dict | None) -> None:
+    # the adaptive schedule continues from the learning rate in use, not the configured start value
+    runner.alg.learning_rate = runner.alg.optimizer.param_groups[0]["lr"]
     if not infos:
         log.warning("checkpoint has no training state (RNG, curriculum): continuing from fresh streams")
         return
+    env.load_training_state(infos)
+    snap = env_snapshot_path(checkpoint)
+    if snap.is_file():
+        env.set_state(torch.load(snap, weights_only=False))
+    else:
+        log.warning("no env snapshot %s: the resumed run starts fresh episodes", snap)
     torch.set_rng_state(infos["torch_rng"])
     env.generator.set_state(infos["env_rng"])
-    env.load_training_state(infos)
 
 
 def train(cfg: TrainCfg) -> Path:
@@ -139,7 +162,7 @@ def train(cfg: TrainCfg) -> Path:
     env = make_env(cfg)
     runner = OnPolicyRunner(env, runner_cfg(cfg.algo), log_dir=str(run_dir), device=str(env.device))
     if cfg.resume:
-        _restore_training_state(env, runner.load(cfg.resume))
+        _restore_training_state(runner, env, cfg.resume, runner.load(cfg.resume))
         runner.current_learning_iteration += 1  # the checkpoint's iteration is complete
         log.info("resumed %s at iteration %d", cfg.resume, runner.current_learning_iteration)
     elif cfg.init:
@@ -152,8 +175,7 @@ def train(cfg: TrainCfg) -> Path:
             "nothing to do: the run is at iteration %d of %d", runner.current_learning_iteration, cfg.max_iterations
         )
         return run_dir
-    save = runner.save
-    runner.save = lambda path, infos=None: save(path, infos=_training_state(env))
+    _save_with_state(runner, env, runner.save)
     if cfg.max_minutes > 0:
         _stop_after_minutes(runner, cfg.max_minutes)
     try:

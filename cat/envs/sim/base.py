@@ -84,6 +84,20 @@ class PhysicsBackend(ABC):
     def reset(self, env_ids: torch.Tensor, qpos: torch.Tensor, qvel: torch.Tensor) -> None:
         """Set the state of worlds ``env_ids`` (qpos (k, nq), qvel (k, nv)) and recompute their sensors."""
 
+    # --- snapshots (exact resume of a training run) ---------------------------------------------------------
+    def get_state(self) -> dict[str, torch.Tensor]:
+        """Copies of every world's qpos, qvel and sensordata."""
+        return {"qpos": self.qpos.clone(), "qvel": self.qvel.clone(), "sensordata": self.sensordata.clone()}
+
+    def set_state(self, state: dict[str, torch.Tensor]) -> None:
+        """Restore ``get_state``'s snapshot into all worlds (sensors as they were, not recomputed)."""
+        if state["qpos"].shape != self.qpos.shape:
+            raise ValueError(
+                f"sim snapshot of shape {tuple(state['qpos'].shape)} does not fit {tuple(self.qpos.shape)}"
+            )
+        self.reset(torch.arange(self.num_envs), state["qpos"], state["qvel"])
+        self._sens.copy_(state["sensordata"].to(self._sens))
+
     # --- domain randomisation -------------------------------------------------------------------------
     def set_actuator_gains(self, env_ids: torch.Tensor, kp: torch.Tensor, kd: torch.Tensor) -> None:
         """Per-world PD gains (k, nu); backends that cannot randomise raise ``NotImplementedError``."""

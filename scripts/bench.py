@@ -1,11 +1,11 @@
-"""Benchmarks: ``python scripts/bench.py sim`` | ``python scripts/bench.py fields`` (extra args pass through)."""
+"""Benchmarks: ``python scripts/bench.py sim|fields|train`` (extra args pass through to the case)."""
 
 from __future__ import annotations
 
 import importlib
 import sys
 
-COMMANDS = {"sim": "cat.envs.bench", "fields": "cat.fields.bench"}
+COMMANDS = {"sim": "cat.envs.bench", "fields": "cat.fields.bench", "train": "cat.learning.bench"}
 
 
 def main(argv: list[str]) -> int:

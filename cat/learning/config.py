@@ -49,7 +49,7 @@ class TrainCfg:
     max_iterations: int = 1500  # total PPO iterations of the run (a resumed run continues up to this count)
     max_minutes: float = 0.0  # > 0: stop cleanly after this much wall-clock, save, and resume later
     seed: int = 0
-    env_torch_threads: int = 1  # torch threads inside env.step (0: torch's default); the PPO update keeps the default
+    torch_threads: int = 1  # torch intra-op threads (0: torch's default); MuJoCo's own workers use every core
     init: str | None = None  # checkpoint whose policy/critic weights initialise this run
     resume: str | None = None  # checkpoint to continue, in its own run folder (optimiser, iteration, RNG, curriculum)
     run_root: str = "runs"

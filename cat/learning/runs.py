@@ -24,6 +24,17 @@ class CheckpointError(FileNotFoundError):
     """A checkpoint or its run folder is missing or unreadable."""
 
 
+def set_torch_threads(threads: int) -> None:
+    """Torch intra-op threads for the whole run (0: torch's default).
+
+    The env's tensors are small (N x ~100) and the PPO networks modest; on a few shared cores, multi-threaded
+    torch ops spin-wait on peers that MuJoCo's workers or other processes have descheduled: measured on the
+    2-core machine under load, a PPO update took 26-46 s with 2 threads against ~2 s with one.
+    """
+    if threads > 0:
+        torch.set_num_threads(threads)
+
+
 def make_env(cfg: TrainCfg, num_envs: int | None = None) -> TraversalEnv:
     """The env of a run config (``num_envs`` overrides both the task's and the run's)."""
     n = num_envs or cfg.num_envs or cfg.task.num_envs
@@ -124,26 +135,6 @@ def _save_with_state(runner: OnPolicyRunner, env: TraversalEnv, save) -> None:
     runner.save = save_all
 
 
-def _env_step_threads(env: TraversalEnv, threads: int) -> None:
-    """Run the env's step with ``threads`` torch threads (the PPO update keeps the process default).
-
-    The env's tensors are small (N x ~100): one thread does them as fast, and with MuJoCo's worker threads or
-    other processes on the cores, multi-threaded torch ops wait on descheduled peers (measured 2.6x slower per
-    step on the 2-core machine under load).
-    """
-    step = env.step
-
-    def step_with_threads(actions):
-        prev = torch.get_num_threads()
-        torch.set_num_threads(threads)
-        try:
-            return step(actions)
-        finally:
-            torch.set_num_threads(prev)
-
-    env.step = step_with_threads
-
-
 def _restore_training_state(runner: OnPolicyRunner, env: TraversalEnv, checkpoint: str, infos: dict | None) -> None:
     # the adaptive schedule continues from the learning rate in use, not the configured start value
     runner.alg.learning_rate = runner.alg.optimizer.param_groups[0]["lr"]
@@ -168,6 +159,7 @@ def train(cfg: TrainCfg) -> Path:
     passes the budget and saves it, so one training can span several sittings.
     """
     torch.manual_seed(cfg.seed)
+    set_torch_threads(cfg.torch_threads)
     if cfg.sim.backend not in BACKENDS:
         raise ValueError(f"unknown sim backend {cfg.sim.backend!r}; valid: {', '.join(BACKENDS)}")
     for path in (cfg.init, cfg.resume):
@@ -196,8 +188,6 @@ def train(cfg: TrainCfg) -> Path:
         )
         return run_dir
     _save_with_state(runner, env, runner.save)
-    if cfg.env_torch_threads > 0:
-        _env_step_threads(env, cfg.env_torch_threads)
     if cfg.max_minutes > 0:
         _stop_after_minutes(runner, cfg.max_minutes)
     try:

@@ -1,0 +1,39 @@
+"""``scripts/bench.py train``: PPO training throughput (env steps/s including learning) vs raw MuJoCo.
+
+Runs ``iterations`` PPO iterations of the flat task (after one warm-up iteration) exactly as ``train`` does,
+without writing a run folder, and compares with raw ``mujoco.rollout`` of the same model in the same process.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import time
+
+from rsl_rl.runners import OnPolicyRunner
+
+from cat.envs.bench import raw_rate
+from cat.learning.config import runner_cfg
+from cat.learning.hydra_cfg import load_config
+from cat.learning.runs import make_env, set_torch_threads
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(prog="bench.py train", description=__doc__)
+    parser.add_argument("--num-envs", type=int, default=1024)
+    parser.add_argument("--iterations", type=int, default=5)
+    parser.add_argument("--seconds", type=float, default=5.0, help="duration of the raw MuJoCo measurement")
+    parser.add_argument("overrides", nargs="*", help="train.py overrides, e.g. algo.symmetry_augment=true")
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.WARNING)
+    cfg = load_config(["task=flat", f"num_envs={args.num_envs}", *args.overrides])
+    set_torch_threads(cfg.torch_threads)
+    env = make_env(cfg)
+    runner = OnPolicyRunner(env, runner_cfg(cfg.algo), log_dir=None, device=str(env.device))
+    runner.learn(1, init_at_random_ep_len=True)  # warm-up
+    start = time.perf_counter()
+    runner.learn(args.iterations)
+    elapsed = time.perf_counter() - start
+    x = args.iterations * cfg.algo.num_steps_per_env * env.num_envs / elapsed
+    y = raw_rate(env.sim.model, env.num_envs, env.robot.decimation, args.seconds)
+    print(f"case=train num_envs={env.num_envs} env_steps_per_s={x:.0f} raw_env_steps_per_s={y:.0f} ratio={x / y:.2f}")

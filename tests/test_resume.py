@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import pytest
 import torch
 
 from cat.learning.hydra_cfg import load_config
@@ -43,3 +44,29 @@ def test_max_minutes_stops_saves_and_resume_counts_on(tmp_path):
     train(resume_config(saved[0], ["max_iterations=2", "max_minutes=0"]))
     assert torch.load(run / "model_1.pt", weights_only=False)["iter"] == 1
     assert (run / "metrics_1.rrd").is_file()  # the resumed part is recorded beside the first
+
+
+@pytest.mark.parametrize(
+    "override, message",
+    [
+        ("num_envs=0", "num_envs=0: must be >= 1"),
+        ("max_iterations=0", "max_iterations=0: must be >= 1"),
+        ("max_iterations=-1", "max_iterations=-1: must be >= 1"),
+        ("max_minutes=-2", "max_minutes=-2.0: must be >= 0"),
+        ("task.scene_kind=no-such-kind", "no-such-kind"),
+    ],
+)
+def test_bad_values_fail_before_a_run_folder_exists(tmp_path, override, message):
+    with pytest.raises(ValueError, match=message):
+        train(load_config(_base(tmp_path, override)))
+    assert not list(tmp_path.rglob("config.yaml"))
+
+
+def test_run_folders_never_collide_and_record_the_commit(tmp_path):
+    cfg = load_config(_base(tmp_path, "max_iterations=1"))
+    a, b = train(cfg), train(cfg)
+    assert a != b and a.parent == b.parent
+    diff = next((a / "git").glob("*.diff"), None)
+    assert diff is not None and "--- git commit ---" in diff.read_text()
+    rows = (a / "metrics.csv").read_text().splitlines()[1:]
+    assert rows and all(int(r.split(",")[0]) == 0 for r in rows)  # one axis: iterations only (no seconds)

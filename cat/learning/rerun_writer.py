@@ -31,6 +31,12 @@ class RerunLogWriter(LogWriter):
             self._csv.write("iteration,tag,value\n")
 
     def add_scalar(self, tag: str, scalar_value: float, global_step: int) -> None:
+        if tag.endswith("/time"):  # rsl_rl's copies indexed by elapsed seconds: their own timeline, not the csv
+            self.rec.reset_time()
+            self.rec.set_time("elapsed_s", sequence=int(global_step))
+            self.rec.log(tag, rr.Scalars(float(scalar_value)))
+            return
+        self.rec.reset_time()
         self.rec.set_time("iteration", sequence=int(global_step))
         self.rec.log(tag, rr.Scalars(float(scalar_value)))
         self._csv.write(f"{int(global_step)},{tag},{float(scalar_value):.6g}\n")

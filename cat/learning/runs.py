@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 import os
+import shutil
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -13,6 +14,7 @@ import yaml
 from omegaconf import OmegaConf
 from rsl_rl.runners import OnPolicyRunner
 
+import cat
 from cat.envs.sim import BACKENDS
 from cat.envs.traversal_env import TraversalEnv
 from cat.learning.config import TrainCfg, runner_cfg
@@ -51,11 +53,45 @@ def make_env(cfg: TrainCfg, num_envs: int | None = None) -> TraversalEnv:
 
 
 def new_run_dir(cfg: TrainCfg) -> Path:
+    """``<run_root>/<task>/<time>[_<run_name>]``, with ``-<k>`` appended if two runs start in the same second."""
     stamp = time.strftime("%Y-%m-%d_%H-%M-%S")
     name = f"{stamp}_{cfg.run_name}" if cfg.run_name else stamp
-    path = Path(cfg.run_root) / cfg.task.task / name
-    path.mkdir(parents=True, exist_ok=False)
-    return path
+    base = Path(cfg.run_root) / cfg.task.task
+    base.mkdir(parents=True, exist_ok=True)
+    for k in range(1000):
+        path = base / (name if k == 0 else f"{name}-{k}")
+        try:
+            path.mkdir()
+            return path
+        except FileExistsError:
+            continue
+    raise RuntimeError(f"could not create a fresh run folder under {base}")
+
+
+def validate_train_cfg(cfg: TrainCfg) -> None:
+    """Refuse values that would silently do something else (one-line ``ValueError`` naming the key)."""
+    counts = {
+        "num_envs": cfg.num_envs if cfg.num_envs is not None else 1,
+        "task.num_envs": cfg.task.num_envs,
+        "max_iterations": cfg.max_iterations,
+        "algo.num_steps_per_env": cfg.algo.num_steps_per_env,
+        "algo.num_learning_epochs": cfg.algo.num_learning_epochs,
+        "algo.num_mini_batches": cfg.algo.num_mini_batches,
+        "algo.save_interval": cfg.algo.save_interval,
+    }
+    for key, value in counts.items():
+        if value < 1:
+            raise ValueError(f"{key}={value}: must be >= 1")
+    for key, value in {"max_minutes": cfg.max_minutes, "torch_threads": cfg.torch_threads}.items():
+        if value < 0:
+            raise ValueError(f"{key}={value}: must be >= 0 (0 = off / default)")
+    if cfg.task.episode_length_s <= 0:
+        raise ValueError(f"task.episode_length_s={cfg.task.episode_length_s}: must be > 0")
+    if cfg.sim.backend not in BACKENDS:
+        raise ValueError(f"unknown sim backend {cfg.sim.backend!r}; valid: {', '.join(BACKENDS)}")
+    for path in (cfg.init, cfg.resume):
+        if path and not Path(path).is_file():
+            raise CheckpointError(f"checkpoint not found: {path}")
 
 
 def save_config(cfg: TrainCfg, run_dir: Path) -> None:
@@ -158,21 +194,24 @@ def train(cfg: TrainCfg) -> Path:
     RNG, curriculum) up to ``max_iterations`` in total; ``cfg.max_minutes`` > 0 stops after the iteration that
     passes the budget and saves it, so one training can span several sittings.
     """
+    validate_train_cfg(cfg)
     torch.manual_seed(cfg.seed)
     set_torch_threads(cfg.torch_threads)
-    if cfg.sim.backend not in BACKENDS:
-        raise ValueError(f"unknown sim backend {cfg.sim.backend!r}; valid: {', '.join(BACKENDS)}")
-    for path in (cfg.init, cfg.resume):
-        if path and not Path(path).is_file():
-            raise CheckpointError(f"checkpoint not found: {path}")
-    if cfg.resume:
-        run_dir = Path(cfg.resume).parent
-    else:
-        run_dir = new_run_dir(cfg)
+    env = make_env(cfg)  # before any folder exists: a bad scene or model leaves nothing behind
+    run_dir = Path(cfg.resume).parent if cfg.resume else new_run_dir(cfg)
+    try:
+        return _train_in(cfg, env, run_dir)
+    except BaseException:
+        if not cfg.resume and not any(run_dir.glob("model_*.pt")):
+            shutil.rmtree(run_dir, ignore_errors=True)  # no half-made run folder
+        raise
+
+
+def _train_in(cfg: TrainCfg, env: TraversalEnv, run_dir: Path) -> Path:
     save_config(cfg, run_dir)
     log.info("run folder: %s", run_dir)
-    env = make_env(cfg)
     runner = OnPolicyRunner(env, runner_cfg(cfg.algo), log_dir=str(run_dir), device=str(env.device))
+    runner.logger.git_status_repos = [cat.__file__]  # record this project's commit and diff in <run>/git/
     if cfg.resume:
         _restore_training_state(runner, env, cfg.resume, runner.load(cfg.resume))
         runner.current_learning_iteration += 1  # the checkpoint's iteration is complete

@@ -11,7 +11,7 @@ import pytest
 
 from cat.learning.hydra_cfg import ConfigError, load_config
 from cat.learning.play import PlayCfg, play
-from cat.learning.runs import CheckpointError, train
+from cat.learning.runs import CheckpointError, resume_config, train
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -46,9 +46,9 @@ def test_train_save_reload_play_mujoco(tmp_path):
     ).stdout
     for entity in ("world/robot/capsules", "world/goal", "world/field/F_H"):
         assert entity in printed
-    # resume continues the iteration count; init loads only weights
-    resumed = train(_small(tmp_path, f"resume={ckpt}"))
-    assert any(int(p.stem.split("_")[1]) > 1 for p in resumed.glob("model_*.pt"))
+    # resume continues the iteration count in the same run folder; init loads only weights
+    resumed = train(resume_config(ckpt, ["max_iterations=3"]))
+    assert resumed == ckpt.parent and (resumed / "model_2.pt").is_file()
     inited = train(_small(tmp_path, f"init={ckpt}"))
     assert (inited / "model_1.pt").is_file()
 

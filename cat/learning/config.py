@@ -49,6 +49,7 @@ class TrainCfg:
     max_iterations: int = 1500  # total PPO iterations of the run (a resumed run continues up to this count)
     max_minutes: float = 0.0  # > 0: stop cleanly after this much wall-clock, save, and resume later
     seed: int = 0
+    verbose: bool = False  # rsl_rl's per-iteration console block and network printout instead of one log line
     torch_threads: int = 1  # torch intra-op threads (0: torch's default); MuJoCo's own workers use every core
     init: str | None = None  # checkpoint whose policy/critic weights initialise this run
     resume: str | None = None  # checkpoint to continue, in its own run folder (optimiser, iteration, RNG, curriculum)

@@ -18,6 +18,7 @@ import cat
 from cat.envs.sim import BACKENDS
 from cat.envs.traversal_env import TraversalEnv
 from cat.learning.config import TrainCfg, runner_cfg
+from cat.learning.progress import BudgetReached, install_iteration_hook, quiet_constructor
 
 log = logging.getLogger(__name__)
 
@@ -129,27 +130,6 @@ def resume_config(checkpoint: str | os.PathLike, overrides: list[str]) -> TrainC
     return OmegaConf.to_object(merged)
 
 
-class _BudgetReached(Exception):
-    """Raised from the logging hook once ``max_minutes`` is spent (after a complete iteration)."""
-
-
-def _stop_after_minutes(runner: OnPolicyRunner, minutes: float) -> None:
-    """Make ``runner.learn`` end after the first iteration that finishes past ``minutes`` of wall-clock.
-
-    The check rides on the logger's per-iteration call, which comes after the update and the iteration count
-    are final, so the state at the stop is a complete iteration that ``train`` then saves.
-    """
-    deadline = time.monotonic() + 60.0 * minutes
-    log_iteration = runner.logger.log
-
-    def log_then_check(*args, **kwargs):
-        log_iteration(*args, **kwargs)
-        if time.monotonic() >= deadline:
-            raise _BudgetReached
-
-    runner.logger.log = log_then_check
-
-
 def _training_state(env: TraversalEnv) -> dict:
     """What a resumed run needs beyond rsl_rl's checkpoint: RNG streams (and the env's curriculum)."""
     return {"torch_rng": torch.get_rng_state(), "env_rng": env.generator.get_state(), **env.training_state()}
@@ -210,7 +190,8 @@ def train(cfg: TrainCfg) -> Path:
 def _train_in(cfg: TrainCfg, env: TraversalEnv, run_dir: Path) -> Path:
     save_config(cfg, run_dir)
     log.info("run folder: %s", run_dir)
-    runner = OnPolicyRunner(env, runner_cfg(cfg.algo), log_dir=str(run_dir), device=str(env.device))
+    with quiet_constructor(cfg.verbose):
+        runner = OnPolicyRunner(env, runner_cfg(cfg.algo), log_dir=str(run_dir), device=str(env.device))
     runner.logger.git_status_repos = [cat.__file__]  # record this project's commit and diff in <run>/git/
     if cfg.resume:
         _restore_training_state(runner, env, cfg.resume, runner.load(cfg.resume))
@@ -227,11 +208,11 @@ def _train_in(cfg: TrainCfg, env: TraversalEnv, run_dir: Path) -> Path:
         )
         return run_dir
     _save_with_state(runner, env, runner.save)
-    if cfg.max_minutes > 0:
-        _stop_after_minutes(runner, cfg.max_minutes)
+    install_iteration_hook(runner, cfg.max_iterations, cfg.max_minutes, cfg.verbose)
     try:
-        runner.learn(remaining, init_at_random_ep_len=not cfg.resume)
-    except _BudgetReached:
+        with quiet_constructor(cfg.verbose):  # rsl_rl's "Storing git diff" lines
+            runner.learn(remaining, init_at_random_ep_len=not cfg.resume)
+    except BudgetReached:
         it = runner.current_learning_iteration
         runner.save(str(run_dir / f"model_{it}.pt"))
         runner.logger.stop_logging_writer()

@@ -22,6 +22,7 @@ setup(
         "mujoco-menagerie>=2026.10.4",
         "trimesh>=4.0",
         "rtree>=1.2",
+        "charset-normalizer>=3.0",  # trimesh decodes ASCII STL with it; without it junk files fail obscurely
         "coacd>=1.0.5",
         "pytorch-kinematics>=0.7",
         "rerun-sdk==0.41.0",

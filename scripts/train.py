@@ -1,31 +1,41 @@
 """Train a PPO policy: ``python scripts/train.py task=flat sim=mujoco num_envs=16 max_iterations=2``.
 
-Keys are hydra overrides of ``configs/train.yaml`` (``task=``, ``sim=``, ``num_envs=``, ``max_iterations=``,
-``seed=``, ``init=<checkpoint>``, ``resume=<checkpoint>``, any ``task.*`` / ``algo.*`` field).
+Keys are hydra overrides of ``configs/train.yaml``: task=, sim=, algo=, num_envs=, max_iterations=,
+max_minutes=, seed=, init=<checkpoint>, resume=<checkpoint>, run_root= / run_name= / run_dir=, and any task.* /
+algo.* field. ``resume=`` continues that run with its own config; other keys given change only themselves.
 """
 
 from __future__ import annotations
 
-import logging
 import sys
 
-from cat.learning.hydra_cfg import ConfigError, load_config
-from cat.learning.runs import CheckpointError, resume_config, train
+from cat.cli import Script, run
+from cat.learning.hydra_cfg import _options, load_config
+from cat.learning.runs import CheckpointError, resume_config, train, validate_train_cfg
 
 
-def main(argv: list[str]) -> int:
-    logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
-    try:
-        cfg = load_config(argv)
-        if cfg.resume:
-            cfg = resume_config(cfg.resume, argv)
-        run_dir = train(cfg)
-    except (ConfigError, CheckpointError, ValueError) as err:
-        logging.getLogger("train").error("%s", err)
-        return 2
-    print(f"run folder: {run_dir}")
+def _load(overrides: list[str]):
+    cfg = load_config(overrides)
+    cfg = resume_config(cfg.resume, overrides) if cfg.resume else cfg
+    validate_train_cfg(cfg)  # every job of a multirun is checked before the first starts
+    return cfg
+
+
+def _job(cfg) -> int:
+    print(f"run folder: {train(cfg)}")
     return 0
 
 
+SCRIPT = Script(
+    name="train",
+    doc=__doc__,
+    load=_load,
+    job=_job,
+    run_dir_key="run_dir",
+    groups={g: _options(g) for g in ("task", "sim", "algo")},
+    keys=["num_envs", "max_iterations", "max_minutes", "seed", "init", "resume", "run_name", "verbose"],
+    errors=(CheckpointError, ValueError),
+)
+
 if __name__ == "__main__":
-    sys.exit(main(sys.argv[1:]))
+    sys.exit(run(SCRIPT, sys.argv[1:]))

@@ -53,8 +53,9 @@ class TrainCfg:
     torch_threads: int = 1  # torch intra-op threads (0: torch's default); MuJoCo's own workers use every core
     init: str | None = None  # checkpoint whose policy/critic weights initialise this run
     resume: str | None = None  # checkpoint to continue, in its own run folder (optimiser, iteration, RNG, curriculum)
-    run_root: str = "runs"
+    run_root: str = "runs"  # runs go to <run_root>/<task>/<time>[_<run_name>]
     run_name: str = ""
+    run_dir: str | None = None  # exact run folder instead (hydra.run.dir=...; must not exist or be empty)
 
 
 def _symmetry_cfg(algo: AlgoCfg) -> dict[str, Any] | None:

@@ -6,7 +6,6 @@ error that lists the valid ones instead of being silently ignored.
 
 from __future__ import annotations
 
-from dataclasses import fields, is_dataclass
 from pathlib import Path
 
 from hydra import compose, initialize_config_dir
@@ -14,24 +13,14 @@ from hydra.core.config_store import ConfigStore
 from hydra.core.global_hydra import GlobalHydra
 from omegaconf import OmegaConf
 
+from cat.cli import CliError, unknown_key_message, valid_keys
 from cat.learning.config import TrainCfg
 
 CONFIG_DIR = Path(__file__).resolve().parents[2] / "configs"
 
 
-class ConfigError(ValueError):
+class ConfigError(CliError):
     """A bad command-line override or config file."""
-
-
-def _valid_keys(schema, prefix: str = "") -> list[str]:
-    keys = []
-    for f in fields(schema):
-        default = f.default_factory() if callable(f.default_factory) else f.default  # type: ignore[misc]
-        if is_dataclass(default):
-            keys += _valid_keys(default, prefix + f.name + ".")
-        else:
-            keys.append(prefix + f.name)
-    return keys
 
 
 def _options(group: str) -> list[str]:
@@ -52,15 +41,17 @@ def load_config(overrides: list[str], config_name: str = "train", schema=TrainCf
             raise ConfigError(
                 f"unknown {key} {item.split('=', 1)[1]!r}; valid {key} options: {', '.join(_options(key))}"
             )
-        valid = _valid_keys(schema())
+        valid = valid_keys(schema())
         if key not in valid and key not in groups:
-            raise ConfigError(f"unknown config key {key!r}; valid keys: {', '.join(valid)}")
+            raise ConfigError(unknown_key_message(key, valid + groups))
     GlobalHydra.instance().clear()
     try:
         with initialize_config_dir(config_dir=str(CONFIG_DIR), version_base=None):
             cfg = compose(config_name=config_name, overrides=list(overrides))
-    except Exception as err:  # hydra's own message names the bad key/value
-        raise ConfigError(f"bad configuration: {err}") from err
+    except Exception as err:  # hydra's message names the override; its cause says what is wrong with it
+        reason = err.__cause__ or err.__context__
+        detail = f": {str(reason).splitlines()[0]}" if reason is not None and str(reason) else ""
+        raise ConfigError(f"{str(err).splitlines()[0]}{detail}") from err
     finally:
         GlobalHydra.instance().clear()
     return OmegaConf.to_object(cfg)

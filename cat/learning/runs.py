@@ -19,12 +19,27 @@ from cat.envs.sim import BACKENDS
 from cat.envs.traversal_env import TraversalEnv
 from cat.learning.config import TrainCfg, runner_cfg
 from cat.learning.progress import BudgetReached, install_iteration_hook, quiet_constructor
+from cat.terrain import TYPICAL_KINDS
 
 log = logging.getLogger(__name__)
 
 
 class CheckpointError(FileNotFoundError):
     """A checkpoint or its run folder is missing or unreadable."""
+
+
+def read_checkpoint(path: str | os.PathLike) -> dict:
+    """A PPO checkpoint's dict, or ``CheckpointError`` naming the file (missing, corrupt, not rsl_rl's)."""
+    path = Path(path)
+    if not path.is_file():
+        raise CheckpointError(f"checkpoint not found: {path}")
+    try:
+        ckpt = torch.load(path, map_location="cpu", weights_only=False)
+    except Exception as err:  # pickle / zip / EOF errors of a damaged or foreign file
+        raise CheckpointError(f"{path}: not a readable checkpoint ({type(err).__name__}: {err})") from None
+    if not isinstance(ckpt, dict) or "actor_state_dict" not in ckpt:
+        raise CheckpointError(f"{path}: not an rsl_rl PPO checkpoint (no actor_state_dict)")
+    return ckpt
 
 
 def set_torch_threads(threads: int) -> None:
@@ -54,7 +69,14 @@ def make_env(cfg: TrainCfg, num_envs: int | None = None) -> TraversalEnv:
 
 
 def new_run_dir(cfg: TrainCfg) -> Path:
-    """``<run_root>/<task>/<time>[_<run_name>]``, with ``-<k>`` appended if two runs start in the same second."""
+    """``<run_root>/<task>/<time>[_<run_name>]``, with ``-<k>`` appended if two runs start in the same second;
+    or exactly ``cfg.run_dir`` when given (it must not exist, or be empty)."""
+    if cfg.run_dir:
+        path = Path(cfg.run_dir)
+        if path.exists() and any(path.iterdir()):
+            raise ValueError(f"run_dir {path} exists and is not empty")
+        path.mkdir(parents=True, exist_ok=True)
+        return path
     stamp = time.strftime("%Y-%m-%d_%H-%M-%S")
     name = f"{stamp}_{cfg.run_name}" if cfg.run_name else stamp
     base = Path(cfg.run_root) / cfg.task.task
@@ -86,13 +108,20 @@ def validate_train_cfg(cfg: TrainCfg) -> None:
     for key, value in {"max_minutes": cfg.max_minutes, "torch_threads": cfg.torch_threads}.items():
         if value < 0:
             raise ValueError(f"{key}={value}: must be >= 0 (0 = off / default)")
+    if cfg.task.scene_kind:
+        cfg.task.scene_kind = cfg.task.scene_kind.replace("_", "-")  # task names use _, scene kinds use -
+        if not cfg.task.scene_dir and cfg.task.scene_kind not in TYPICAL_KINDS:
+            raise ValueError(
+                f"task.scene_kind={cfg.task.scene_kind!r} without task.scene_dir must be a typical kind: "
+                f"{', '.join(TYPICAL_KINDS)}"
+            )
     if cfg.task.episode_length_s <= 0:
         raise ValueError(f"task.episode_length_s={cfg.task.episode_length_s}: must be > 0")
     if cfg.sim.backend not in BACKENDS:
         raise ValueError(f"unknown sim backend {cfg.sim.backend!r}; valid: {', '.join(BACKENDS)}")
     for path in (cfg.init, cfg.resume):
-        if path and not Path(path).is_file():
-            raise CheckpointError(f"checkpoint not found: {path}")
+        if path:
+            read_checkpoint(path)
 
 
 def save_config(cfg: TrainCfg, run_dir: Path) -> None:

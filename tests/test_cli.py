@@ -1,0 +1,89 @@
+"""The scripts keep hydra's promises (--help, --cfg job, -m, hydra.run.dir / hydra.sweep.dir) and fail in one
+line (exit code 2) with nothing left behind."""
+
+from __future__ import annotations
+
+import importlib.util
+import logging
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+SMALL = ["task=flat", "num_envs=4", "max_iterations=1", "algo.num_steps_per_env=4"]
+
+
+def _run(script: str, *args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    return subprocess.run(
+        [sys.executable, str(REPO / "scripts" / script), *args],
+        capture_output=True, text=True, timeout=600, env=env, cwd=cwd,
+    )  # fmt: skip
+
+
+def _train_script():
+    """scripts/train.py as a module, to run its command line in-process (same code path, no start-up cost)."""
+    spec = importlib.util.spec_from_file_location("train_script", REPO / "scripts" / "train.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def _one_error_line(res: subprocess.CompletedProcess, needle: str) -> None:
+    assert res.returncode == 2, res.stderr
+    errors = [ln for ln in res.stderr.splitlines() if ln.startswith("ERROR")]
+    assert len(errors) == 1 and needle in errors[0], res.stderr
+    assert "Traceback" not in res.stderr
+
+
+def test_help_and_cfg_job_build_nothing(tmp_path):
+    res = _run("train.py", "--help", cwd=tmp_path)
+    assert res.returncode == 0 and "task={" in res.stdout and "--cfg job" in res.stdout
+    res = _run("train.py", *SMALL, "--cfg", "job", cwd=tmp_path)
+    assert res.returncode == 0 and "max_iterations: 1" in res.stdout
+    assert not list(tmp_path.iterdir())
+
+
+def test_multirun_and_hydra_dirs(tmp_path):
+    res = _run("train.py", "-m", *SMALL, "seed=0,1", f"hydra.sweep.dir={tmp_path / 'sweep'}")
+    assert res.returncode == 0, res.stderr
+    assert sorted(p.name for p in (tmp_path / "sweep").iterdir()) == ["0", "1"]
+    for k in ("0", "1"):
+        assert list((tmp_path / "sweep" / k).glob("model_*.pt"))
+    res = _run("train.py", *SMALL, f"hydra.run.dir={tmp_path / 'exact'}")
+    assert res.returncode == 0 and (tmp_path / "exact" / "config.yaml").is_file()
+
+
+@pytest.mark.parametrize(
+    "args, needle",
+    [
+        (["num_env=3"], "did you mean num_envs"),
+        (["max_iterations=abc"], "could not be converted to Integer"),
+        (["num_envs=0"], "num_envs=0"),
+        (["max_iterations=0"], "max_iterations=0"),
+        (["task=flatt"], "valid task options"),
+        (["sim=warpp"], "valid sim options"),
+        (["init=/no/such.pt"], "checkpoint not found"),
+        (["--cfg"], "--cfg takes"),
+        (["hydra.job.chdir=true"], "not supported"),
+        (["-m", "seed=0,1", "max_iterations=1,0"], "max_iterations=0"),  # every job checked before any runs
+    ],
+)
+def test_bad_input_one_line_nothing_left(tmp_path, caplog, args, needle):
+    mod = _train_script()
+    with caplog.at_level(logging.ERROR):
+        code = mod.run(mod.SCRIPT, [*args, f"run_root={tmp_path / 'runs'}"])
+    errors = [r.getMessage() for r in caplog.records if r.levelno >= logging.ERROR]
+    assert code == 2 and len(errors) == 1 and needle in errors[0], errors
+    assert not (tmp_path / "runs").exists()
+
+
+def test_corrupt_checkpoint_is_one_line_from_the_real_script(tmp_path):
+    bad = tmp_path / "model_3.pt"
+    bad.write_bytes(b"definitely not a torch file")
+    res = _run("train.py", *SMALL, f"init={bad}", f"run_root={tmp_path / 'runs'}")
+    _one_error_line(res, "model_3.pt: not a readable checkpoint")
+    assert not (tmp_path / "runs").exists()

@@ -141,6 +141,22 @@ class SceneSet:
         """Move envs to other scenes (takes effect at their next ``sample_episode``)."""
         self.scene_of_env[env_ids.cpu()] = scene_ids.cpu()
 
+    def place(self, env_ids: torch.Tensor, scene_ids: torch.Tensor, goal_ids: torch.Tensor) -> None:
+        """Put envs in given scenes with given goals (evaluation trials; ``field_ids`` follows)."""
+        ids, scene_ids, goal_ids = env_ids.cpu(), scene_ids.cpu().long(), goal_ids.cpu().long()
+        n_goals = torch.tensor([len(s.goals) for s in self.scenes])
+        if ((scene_ids < 0) | (scene_ids >= len(self.scenes))).any() or (
+            (goal_ids < 0) | (goal_ids >= n_goals[scene_ids])
+        ).any():
+            raise IndexError(f"scene/goal ids out of range for {len(self.scenes)} scenes with {n_goals.tolist()} goals")
+        self.scene_of_env[ids] = scene_ids
+        self._goal_idx[ids] = goal_ids
+
+    def to_world(self, scene_ids: torch.Tensor, points: torch.Tensor) -> torch.Tensor:
+        """Scene-frame points (k, 2|3) of scenes ``scene_ids`` (k,) in the shared world frame (tile offset added)."""
+        off = torch.as_tensor(self.offsets, dtype=points.dtype)[scene_ids.cpu().long()]
+        return points + off[:, : points.shape[-1]].to(points.device)
+
     def field_source(self, device) -> BankField:
         return BankField(self.bank, self.num_envs)
 

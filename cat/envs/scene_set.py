@@ -107,7 +107,7 @@ class SceneSet:
             raise SceneSetError(f"no scenes{' of kind ' + repr(kind) if kind else ''} under {root}; found: {kinds}")
         scenes, folders = [scenes[i] for i in keep], [folders[i] for i in keep]
         pairs = list(zip(scenes, folders, strict=True))
-        fields = [_scene_fields(s, f, field_cfg) for s, f in tqdm(pairs, desc="fields")]
+        fields = [scene_fields(s, f, field_cfg) for s, f in tqdm(pairs, desc="fields")]
         return cls(scenes, fields, num_envs, device)
 
     @classmethod
@@ -122,7 +122,7 @@ class SceneSet:
     ) -> SceneSet:
         """The paper's typical scenes of ``kind`` built on the fly (no dataset needed)."""
         scenes = typical_variants(kind, variants, seed)
-        fields = [_scene_fields(s, None, field_cfg) for s in tqdm(scenes, desc=f"{kind} fields")]
+        fields = [scene_fields(s, None, field_cfg) for s in tqdm(scenes, desc=f"{kind} fields")]
         return cls(scenes, fields, num_envs, device)
 
     # --- env hooks ----------------------------------------------------------------------------------------
@@ -187,7 +187,7 @@ class SceneSet:
         return self.scenes[s_idx].mesh.copy().apply_translation(self.offsets[s_idx])
 
 
-def _scene_fields(scene: Scene, folder: Path | None, cfg: FieldCfg | None) -> list[Field]:
+def scene_fields(scene: Scene, folder: Path | None, cfg: FieldCfg | None) -> list[Field]:
     """Precomputed fields of a scene folder when complete, else built from its occupancy now."""
     if folder is not None:
         files = [Scene.fields_dir(folder) / f"goal_{i:02d}.npz" for i in range(len(scene.goals))]

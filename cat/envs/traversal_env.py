@@ -336,7 +336,7 @@ class TraversalEnv(VecEnv):
 
     _SNAPSHOT = (
         "targets", "actions", "prev_actions", "goals", "phase", "gait_freq", "episode_length_buf", "step_count",
-        "push_timer", "reached_time", "collided_ever", "min_goal_dist", "field_obs_buf", "kp", "kd", "dr_scales",
+        "push_timer", "field_obs_buf", "kp", "kd", "dr_scales",
     )  # fmt: skip
 
     def get_state(self) -> dict:
@@ -344,6 +344,7 @@ class TraversalEnv(VecEnv):
         bookkeeping, scene/goal assignment and the current observations (an exact training resume)."""
         snap = {name: getattr(self, name).clone() for name in self._SNAPSHOT}
         snap["episode_sums"] = {k: v.clone() for k, v in self.episode_sums.items()}
+        snap["trial"] = self.trial.state_dict()
         snap["common_step"] = self.common_step
         snap["sim"] = self.sim.get_state()
         snap["obs"] = self.obs_buf.clone()
@@ -361,6 +362,7 @@ class TraversalEnv(VecEnv):
             getattr(self, name).copy_(snap[name])
         for k, v in snap["episode_sums"].items():
             self.episode_sums[k].copy_(v)
+        self.trial.load_state_dict(snap["trial"])
         self.common_step = snap["common_step"]
         if self.cfg.domain_rand.enabled:
             self._apply_dr(torch.arange(self.num_envs), self.dr_scales)

@@ -83,6 +83,14 @@ class TrialMetrics:
         """Closest horizontal root-goal distance of the trial so far."""
         return self.min_dist[env_ids]
 
+    def state_dict(self) -> dict[str, torch.Tensor]:
+        """Copies of the running statistics (for an exact training resume)."""
+        return {k: getattr(self, k).clone() for k in ("min_dist", "reach_time", "collided", "fell")}
+
+    def load_state_dict(self, state: dict[str, torch.Tensor]) -> None:
+        for k, v in state.items():
+            getattr(self, k).copy_(v)
+
     def results(self, env_ids: torch.Tensor) -> list[TrialResult]:
         """Per-env results (host values) of ``env_ids``."""
         ok = self.success(env_ids).tolist()

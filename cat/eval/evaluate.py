@@ -8,6 +8,7 @@ names and renamed into place, so an error leaves no half-written output.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import logging
@@ -18,6 +19,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from cat.envs.config import SuccessCfg
 from cat.eval.manifest import Manifest, ManifestError, MethodRun, load_manifest
 from cat.eval.metrics import TrialResult
 from cat.eval.runner import EvalCfg, HoldPolicy, SceneGroup, make_eval_env, run_trials
@@ -40,6 +42,8 @@ class EvalTableCfg:
     device: str = "cpu"
     seed: int = 0  # start-pose seed
     max_envs: int = 256  # parallel trials per batch
+    time_s: float = 5.0  # trial length (paper: 5 s)
+    radius: float = 0.1  # success radius (paper: 0.1 m)
 
 
 def scene_groups(manifest: Manifest) -> dict[str, list[SceneGroup]]:
@@ -59,12 +63,18 @@ def check_policy(run: MethodRun, opts: EvalCfg, sim: str, device: str) -> None:
         return
     env = make_eval_env(run.config.task, None, 1, opts, sim, device)
     try:
-        load_policy(run.checkpoint, env, run.config)
+        quiet_load_policy(run.checkpoint, env, run)
     except CheckpointError as err:
         raise ManifestError(
             f"method {run.method!r}: checkpoint {run.checkpoint} does not fit the observation layout of its "
             f"config.yaml ({err})"
         ) from err
+
+
+def quiet_load_policy(checkpoint: str, env, run: MethodRun):
+    """``load_policy`` without rsl_rl's printout of the networks (stdout carries the tables)."""
+    with contextlib.redirect_stdout(io.StringIO()):
+        return load_policy(checkpoint, env, run.config)
 
 
 def trial_row(run: MethodRun, table: str, group: SceneGroup, t: Trial, r: TrialResult) -> dict[str, str]:
@@ -96,7 +106,9 @@ def evaluate(cfg: EvalTableCfg) -> tuple[list[dict[str, str]], dict[str, str]]:
     if cfg.trials_per_scene < 1:
         raise ManifestError(f"trials_per_scene must be >= 1, got {cfg.trials_per_scene}")
     manifest = load_manifest(cfg.manifest)
-    opts = EvalCfg(starts=cfg.trials_per_scene, seed=cfg.seed, max_envs=cfg.max_envs)
+    opts = EvalCfg(
+        starts=cfg.trials_per_scene, seed=cfg.seed, max_envs=cfg.max_envs, success=SuccessCfg(cfg.radius, cfg.time_s)
+    )
     groups = scene_groups(manifest)
     for runs in manifest.methods.values():
         for run in runs:
@@ -119,14 +131,17 @@ def evaluate(cfg: EvalTableCfg) -> tuple[list[dict[str, str]], dict[str, str]]:
                     if run.checkpoint is None:
                         policy = HoldPolicy(env.num_actions)
                     else:
-                        policy = load_policy(run.checkpoint, env, run.config)
+                        policy = quiet_load_policy(run.checkpoint, env, run)
                     bar.set_postfix_str(f"{run.method}/{run.seed} {table} {group.name}")
                     results = run_trials(env, policy, ts, seed=opts.seed, progress=bar)
                     rows += [trial_row(run, table, group, t, r) for t, r in zip(ts, results, strict=True)]
                     del env
     methods = list(manifest.methods)
     files = {"trials.csv": to_csv(rows)}
-    note = f"{opts.starts} start pose(s) per scene goal, 5 s trials, sim={cfg.sim}."
+    note = (
+        f"{opts.starts} start pose(s) per scene goal; success: within {cfg.radius:g} m within {cfg.time_s:g} s, "
+        f"no contact, no fall; sim={cfg.sim}."
+    )
     for table, gl in groups.items():
         names = [g.name for g in gl]
         files[f"{table}.md"] = render_markdown(rows, table, methods, names, note)

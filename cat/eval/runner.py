@@ -142,23 +142,33 @@ def run_trials(
     """Results of ``trials`` in order; ``progress`` (tqdm-like) advances per finished trial."""
     if env.auto_reset:
         raise ValueError("run_trials needs an env with auto_reset = False (see make_eval_env)")
-    n, steps = env.num_envs, env.trial.window
+    steps = env.trial.window
     results: list[TrialResult] = []
-    with torch.random.fork_rng(), torch.inference_mode():
-        for b, first in enumerate(range(0, len(trials), n)):
-            batch = trials[first : first + n]
-            ids = torch.arange(len(batch), device=env.device)
-            env.generator.manual_seed(seed * 1_000_003 + b)  # reset draws, per batch
-            torch.manual_seed(seed * 1_000_003 + b)  # observation noise
-            place(env, ids, batch)
-            obs = env.get_observations()
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)  # small per-step tensors: one thread is much faster on a few shared cores
+    try:
+        with torch.random.fork_rng(), torch.inference_mode():
+            _run_batches(env, policy, trials, seed, steps, results, progress, on_step)
+    finally:
+        torch.set_num_threads(threads)
+    return results
+
+
+def _run_batches(env, policy, trials, seed, steps, results, progress, on_step) -> None:
+    n = env.num_envs
+    for b, first in enumerate(range(0, len(trials), n)):
+        batch = trials[first : first + n]
+        ids = torch.arange(len(batch), device=env.device)
+        env.generator.manual_seed(seed * 1_000_003 + b)  # reset draws, per batch
+        torch.manual_seed(seed * 1_000_003 + b)  # observation noise
+        place(env, ids, batch)
+        obs = env.get_observations()
+        if on_step is not None:
+            on_step(env)
+        for _ in range(steps):
+            obs, _, _, _ = env.step(policy(obs))
             if on_step is not None:
                 on_step(env)
-            for _ in range(steps):
-                obs, _, _, _ = env.step(policy(obs))
-                if on_step is not None:
-                    on_step(env)
-            results += env.trial.results(ids)
-            if progress is not None:
-                progress.update(len(batch))
-    return results
+        results += env.trial.results(ids)
+        if progress is not None:
+            progress.update(len(batch))

@@ -82,6 +82,31 @@ class SceneGroup:
         return SceneSet(self.scenes, self.fields, num_envs, device)
 
 
+def run_scene_group(task: EnvCfg, scene_seed: int | None = None, scene_dir: str = "") -> SceneGroup | None:
+    """The scenes a run trained on (``None``: flat ground), unless ``scene_seed`` / ``scene_dir`` override them.
+
+    Typical tasks rebuild their variants from ``task.scene_seed`` (not the RL seed); dataset tasks read
+    ``task.scene_dir`` filtered to ``task.scene_kind``.
+    """
+    if scene_dir or task.scene_dir:
+        group = SceneGroup.from_dir("scenes", scene_dir or task.scene_dir)
+        if task.scene_kind and not scene_dir:
+            keep = [i for i, s in enumerate(group.scenes) if s.kind == task.scene_kind]
+            if not keep:
+                raise SceneSetError(f"no scenes of kind {task.scene_kind!r} under {task.scene_dir}")
+            pick = (
+                [group.scenes[i] for i in keep],
+                [group.scene_names[i] for i in keep],
+                [group.fields[i] for i in keep],
+            )
+            group = SceneGroup(task.scene_kind, *pick)
+        return group
+    if task.scene_kind:
+        seed = task.scene_seed if scene_seed is None else scene_seed
+        return SceneGroup.typical(task.scene_kind, task.scene_variants, seed)
+    return None
+
+
 def eval_task(task: EnvCfg, num_envs: int, cfg: EvalCfg) -> EnvCfg:
     """The run's task config with the evaluation settings (observation layout and success rule unchanged)."""
     t = copy.deepcopy(task)

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from tqdm import tqdm
 
 from cat.eval.metrics import Summary, summarize
-from cat.eval.runner import EvalCfg, SceneGroup, make_eval_env, run_trials
+from cat.eval.runner import EvalCfg, make_eval_env, run_scene_group, run_trials
 from cat.eval.trials import first_trials, flat_trials, scene_trials
 from cat.learning.runs import load_policy, load_run_config
 
@@ -38,20 +38,7 @@ def play(cfg: PlayCfg) -> Summary:
     task = run_cfg.task
     if cfg.episodes < 1:
         raise ValueError(f"episodes must be >= 1, got {cfg.episodes}")
-    group = None
-    if cfg.scene_dir or task.scene_dir:
-        group = SceneGroup.from_dir("scenes", cfg.scene_dir or task.scene_dir)
-        if task.scene_kind and not cfg.scene_dir:
-            keep = [i for i, s in enumerate(group.scenes) if s.kind == task.scene_kind]
-            group = SceneGroup(
-                task.scene_kind,
-                [group.scenes[i] for i in keep],
-                [group.scene_names[i] for i in keep],
-                [group.fields[i] for i in keep],
-            )
-    elif task.scene_kind:
-        seed = task.scene_seed if cfg.scene_seed is None else cfg.scene_seed
-        group = SceneGroup.typical(task.scene_kind, task.scene_variants, seed)
+    group = run_scene_group(task, cfg.scene_seed, cfg.scene_dir)
     opts = EvalCfg(seed=cfg.seed)
     yaw = opts.start_yaw_range
     if group is None:

@@ -13,20 +13,20 @@ import time
 
 from omegaconf import OmegaConf
 
-from cat.eval.test_set import TestSetCfg, build_test_set
+from cat.eval.test_set import UnseenSetCfg, build_test_set
 from cat.terrain import SceneError
 
 
 def main(argv: list[str]) -> int:
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     log = logging.getLogger("gen_test_set")
-    valid = ", ".join(TestSetCfg.__dataclass_fields__)
+    valid = ", ".join(UnseenSetCfg.__dataclass_fields__)
     for item in argv:
-        if "=" not in item or item.split("=", 1)[0] not in TestSetCfg.__dataclass_fields__:
+        if "=" not in item or item.split("=", 1)[0] not in UnseenSetCfg.__dataclass_fields__:
             log.error("bad argument %r: expected key=value with key in: %s", item, valid)
             return 2
     try:
-        cfg = OmegaConf.to_object(OmegaConf.merge(OmegaConf.structured(TestSetCfg), OmegaConf.from_dotlist(argv)))
+        cfg = OmegaConf.to_object(OmegaConf.merge(OmegaConf.structured(UnseenSetCfg), OmegaConf.from_dotlist(argv)))
         t0 = time.perf_counter()
         index = build_test_set(cfg)
     except (ValueError, SceneError) as err:

@@ -40,7 +40,7 @@ SPLIT_RULE = (
 
 
 @dataclass
-class TestSetCfg:
+class UnseenSetCfg:
     """``scripts/gen_test_set.py`` options."""
 
     out: str = "data/test_unseen"
@@ -72,7 +72,7 @@ def split(scenes: dict[int, Scene]) -> dict[str, list[int]]:
     return {"easy": ranked[:half], "hard": ranked[half:]}
 
 
-def build_test_set(cfg: TestSetCfg, progress: bool = True) -> list[dict]:
+def build_test_set(cfg: UnseenSetCfg, progress: bool = True) -> list[dict]:
     """Generate (or re-use, when complete and identical) the test set under ``cfg.out``; returns the index."""
     if cfg.num_scenes < 2 or cfg.num_scenes % 2:
         raise ValueError(f"num_scenes must be an even number >= 2, got {cfg.num_scenes}")

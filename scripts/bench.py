@@ -1,11 +1,16 @@
-"""Benchmarks: ``python scripts/bench.py sim|fields|train`` (extra args pass through to the case)."""
+"""Benchmarks: ``python scripts/bench.py sim|fields|train|eval`` (extra args pass through to the case)."""
 
 from __future__ import annotations
 
 import importlib
 import sys
 
-COMMANDS = {"sim": "cat.envs.bench", "fields": "cat.fields.bench", "train": "cat.learning.bench"}
+COMMANDS = {
+    "sim": "cat.envs.bench",
+    "fields": "cat.fields.bench",
+    "train": "cat.learning.bench",
+    "eval": "cat.eval.bench",
+}
 
 
 def main(argv: list[str]) -> int:

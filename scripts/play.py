@@ -1,4 +1,9 @@
-"""Run a checkpoint: ``python scripts/play.py checkpoint=<model.pt> episodes=2 [record=rollout.rrd]``."""
+"""Evaluate a checkpoint on the trial protocol: ``python scripts/play.py checkpoint=<model.pt> episodes=20``.
+
+Optional: ``record=rollout.rrd`` (rerun replay of world 0), ``seed=`` (start poses), ``scene_seed=`` /
+``scene_dir=`` (other scenes than the run's), ``sim=``, ``num_envs=``. Prints one line:
+``episodes=<n> success_rate=<x> distance_error=<m> collision_rate=<x> fall_rate=<x>``.
+"""
 
 from __future__ import annotations
 
@@ -7,6 +12,7 @@ import sys
 
 from omegaconf import OmegaConf
 
+from cat.envs.scene_set import SceneSetError
 from cat.learning.play import PlayCfg, play
 from cat.learning.runs import CheckpointError
 
@@ -25,13 +31,10 @@ def main(argv: list[str]) -> int:
         return 2
     try:
         res = play(cfg)
-    except CheckpointError as err:
+    except (CheckpointError, SceneSetError, ValueError) as err:
         log.error("%s", err)
         return 2
-    print(
-        f"episodes={res.episodes} success_rate={res.success_rate:.3f} mean_return={res.mean_return:.3f} "
-        f"distance_error={res.distance_error:.3f} collision_rate={res.collision_rate:.3f}"
-    )
+    print(res.line())
     return 0
 
 

@@ -147,6 +147,7 @@ class EnvCfg:
     scene_dir: str | None = None  # folder of scene folders (scripts/gen_scenes.py); None: see scene_kind
     scene_kind: str | None = None  # keep only scenes of this kind; with no scene_dir, build its typical variants
     scene_variants: int = 10  # typical variants built when scene_dir is None (difficulty spread over [0, 1])
+    scene_seed: int = 0  # seed of the typical variants (seeds scene_seed..+variants-1); not the RL seed
     action_clip: float = 1.0
     gait_freq: tuple[float, float] = (1.3, 1.5)  # gait clock frequency [Hz]
     command: CommandCfg = field(default_factory=CommandCfg)

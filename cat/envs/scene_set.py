@@ -107,7 +107,7 @@ class SceneSet:
             raise SceneSetError(f"no scenes{' of kind ' + repr(kind) if kind else ''} under {root}; found: {kinds}")
         scenes, folders = [scenes[i] for i in keep], [folders[i] for i in keep]
         pairs = list(zip(scenes, folders, strict=True))
-        fields = [_scene_fields(s, f, field_cfg) for s, f in tqdm(pairs, desc="fields")]
+        fields = [scene_fields(s, f, field_cfg) for s, f in tqdm(pairs, desc="fields")]
         return cls(scenes, fields, num_envs, device)
 
     @classmethod
@@ -122,7 +122,7 @@ class SceneSet:
     ) -> SceneSet:
         """The paper's typical scenes of ``kind`` built on the fly (no dataset needed)."""
         scenes = typical_variants(kind, variants, seed)
-        fields = [_scene_fields(s, None, field_cfg) for s in tqdm(scenes, desc=f"{kind} fields")]
+        fields = [scene_fields(s, None, field_cfg) for s in tqdm(scenes, desc=f"{kind} fields")]
         return cls(scenes, fields, num_envs, device)
 
     # --- env hooks ----------------------------------------------------------------------------------------
@@ -140,6 +140,22 @@ class SceneSet:
     def assign_scenes(self, env_ids: torch.Tensor, scene_ids: torch.Tensor) -> None:
         """Move envs to other scenes (takes effect at their next ``sample_episode``)."""
         self.scene_of_env[env_ids.cpu()] = scene_ids.cpu()
+
+    def place(self, env_ids: torch.Tensor, scene_ids: torch.Tensor, goal_ids: torch.Tensor) -> None:
+        """Put envs in given scenes with given goals (evaluation trials; ``field_ids`` follows)."""
+        ids, scene_ids, goal_ids = env_ids.cpu(), scene_ids.cpu().long(), goal_ids.cpu().long()
+        n_goals = torch.tensor([len(s.goals) for s in self.scenes])
+        if ((scene_ids < 0) | (scene_ids >= len(self.scenes))).any() or (
+            (goal_ids < 0) | (goal_ids >= n_goals[scene_ids])
+        ).any():
+            raise IndexError(f"scene/goal ids out of range for {len(self.scenes)} scenes with {n_goals.tolist()} goals")
+        self.scene_of_env[ids] = scene_ids
+        self._goal_idx[ids] = goal_ids
+
+    def to_world(self, scene_ids: torch.Tensor, points: torch.Tensor) -> torch.Tensor:
+        """Scene-frame points (k, 2|3) of scenes ``scene_ids`` (k,) in the shared world frame (tile offset added)."""
+        off = torch.as_tensor(self.offsets, dtype=points.dtype)[scene_ids.cpu().long()]
+        return points + off[:, : points.shape[-1]].to(points.device)
 
     def field_source(self, device) -> BankField:
         return BankField(self.bank, self.num_envs)
@@ -171,7 +187,7 @@ class SceneSet:
         return self.scenes[s_idx].mesh.copy().apply_translation(self.offsets[s_idx])
 
 
-def _scene_fields(scene: Scene, folder: Path | None, cfg: FieldCfg | None) -> list[Field]:
+def scene_fields(scene: Scene, folder: Path | None, cfg: FieldCfg | None) -> list[Field]:
     """Precomputed fields of a scene folder when complete, else built from its occupancy now."""
     if folder is not None:
         files = [Scene.fields_dir(folder) / f"goal_{i:02d}.npz" for i in range(len(scene.goals))]

@@ -32,6 +32,7 @@ from cat.envs.scene import (
     query_vel_sensor,
 )
 from cat.envs.sim import make_backend
+from cat.eval.metrics import TrialMetrics, horizontal_distance
 from cat.fields import FieldCfg, humanoid_pf
 
 
@@ -118,9 +119,8 @@ class TraversalEnv(VecEnv):
         self.common_step = 0
         self.push_timer = torch.zeros(n, **f32)
         self.failed = torch.zeros(n, dtype=torch.bool, device=dev)
-        self.reached_time = torch.full((n,), float("inf"), **f32)
-        self.collided_ever = torch.zeros(n, dtype=torch.bool, device=dev)
-        self.min_goal_dist = torch.zeros(n, **f32)
+        self.auto_reset = True  # False: done envs are not reset inside step (evaluation drives resets)
+        self.trial = TrialMetrics(n, self.dt, self.cfg.success.radius, self.cfg.success.time_s, dev)
         k = len(r.query_links)
         self.w0 = torch.full((k,), self.field_cfg.w_other, **f32)
         self.w0[0] = self.field_cfg.w_root  # the root (pelvis) has priority (paper eq. w0); query_links[0]
@@ -205,7 +205,7 @@ class TraversalEnv(VecEnv):
         link_pos, link_vel, root_xy = st.link_pos[ids], st.link_vel[ids], st.root_pos[ids, :2]
         field = self.field_source.sample(link_pos, goals, env_ids)
         hpf = humanoid_pf(field.force, field.grad_sdf, field.sdf, link_vel, self.w0, self.field_cfg.lam)
-        dist = (goals[:, :2] - root_xy).norm(dim=-1)
+        dist = horizontal_distance(root_xy, goals)
         root_dir = hpf[:, 0, :2]
         root_dir = root_dir / root_dir.norm(dim=-1, keepdim=True).clamp_min(1e-6)
         cmd = root_dir * command_speed(dist, self.cfg.command)[:, None]
@@ -269,7 +269,7 @@ class TraversalEnv(VecEnv):
 
         extras = {"time_outs": time_outs, "log": {}}
         done_ids = dones.nonzero(as_tuple=False).flatten()
-        if len(done_ids) > 0:
+        if len(done_ids) > 0 and self.auto_reset:
             extras["log"] = self._episode_log(done_ids)
             if self.curriculum is not None:
                 self.curriculum.update(done_ids, self.episode_success(done_ids))
@@ -277,9 +277,9 @@ class TraversalEnv(VecEnv):
             extras["episode_end"] = {
                 "env_ids": done_ids,
                 "success": self.episode_success(done_ids),
-                "distance_error": self.min_goal_dist[done_ids].clone(),
-                "collided": self.collided_ever[done_ids].clone(),
-                "fell": self.failed[done_ids].clone(),
+                "distance_error": self.trial.distance_error(done_ids).clone(),
+                "collided": self.trial.collided[done_ids].clone(),
+                "fell": self.trial.fell[done_ids].clone(),
             }
             self.reset_idx(done_ids)
         self._apply_pushes()
@@ -288,25 +288,31 @@ class TraversalEnv(VecEnv):
 
     # --- episode bookkeeping -----------------------------------------------------------------------------
     def _track_success(self) -> None:
-        t = self.step_count.to(torch.float32) * self.dt
-        self.collided_ever |= self.state.collision
-        reached = (self.goal_distance < self.cfg.success.radius) & torch.isinf(self.reached_time)
-        self.reached_time = torch.where(reached, t, self.reached_time)
-        self.min_goal_dist = torch.minimum(self.min_goal_dist, self.goal_distance)
+        """The trial metrics (``cat.eval.metrics``) over the first ``success.time_s`` of each episode."""
+        self.trial.update(self.step_count, self.goal_distance, self.state.collision, self._fell())
+
+    def _fell(self) -> torch.Tensor:
+        """The metric's fall rule: the ``fallen`` termination's thresholds, or a diverged state."""
+        return term_terms.fallen(self) | term_terms.non_finite(self)
 
     def episode_success(self, env_ids: torch.Tensor) -> torch.Tensor:
-        """Paper's success: reached within ``success.radius`` by ``success.time_s`` and never collided."""
-        ok = self.reached_time[env_ids] <= self.cfg.success.time_s + 1e-6
-        return ok & ~self.collided_ever[env_ids]
+        """Paper's success (``TrialMetrics.success``): reached within the trial window, no contact, no fall."""
+        return self.trial.success(env_ids)
+
+    @property
+    def reached_time(self) -> torch.Tensor:
+        """(N,) time of the first arrival within the success radius since reset (inf: not yet)."""
+        return self.trial.reach_time
 
     def _episode_log(self, ids: torch.Tensor) -> dict:
         length_s = (self.step_count[ids].to(torch.float32) * self.dt).clamp_min(self.dt)
         out = {f"Episode_Reward/{k}": (v[ids] / length_s).mean() for k, v in self.episode_sums.items()}
-        out["Metrics/success_rate"] = self.episode_success(ids).float().mean()
-        out["Metrics/reached_rate"] = torch.isfinite(self.reached_time[ids]).float().mean()
-        out["Metrics/distance_error"] = self.min_goal_dist[ids].mean()
-        out["Metrics/collision_rate"] = self.collided_ever[ids].float().mean()
-        out["Metrics/fall_rate"] = self.failed[ids].float().mean()
+        tr = self.trial
+        out["Metrics/success_rate"] = tr.success(ids).float().mean()
+        out["Metrics/reached_rate"] = torch.isfinite(tr.reach_time[ids]).float().mean()
+        out["Metrics/distance_error"] = tr.distance_error(ids).mean()
+        out["Metrics/collision_rate"] = tr.collided[ids].float().mean()
+        out["Metrics/fall_rate"] = tr.fell[ids].float().mean()
         return out
 
     @property
@@ -330,7 +336,7 @@ class TraversalEnv(VecEnv):
 
     _SNAPSHOT = (
         "targets", "actions", "prev_actions", "goals", "phase", "gait_freq", "episode_length_buf", "step_count",
-        "push_timer", "reached_time", "collided_ever", "min_goal_dist", "field_obs_buf", "kp", "kd", "dr_scales",
+        "push_timer", "field_obs_buf", "kp", "kd", "dr_scales",
     )  # fmt: skip
 
     def get_state(self) -> dict:
@@ -338,6 +344,7 @@ class TraversalEnv(VecEnv):
         bookkeeping, scene/goal assignment and the current observations (an exact training resume)."""
         snap = {name: getattr(self, name).clone() for name in self._SNAPSHOT}
         snap["episode_sums"] = {k: v.clone() for k, v in self.episode_sums.items()}
+        snap["trial"] = self.trial.state_dict()
         snap["common_step"] = self.common_step
         snap["sim"] = self.sim.get_state()
         snap["obs"] = self.obs_buf.clone()
@@ -355,6 +362,7 @@ class TraversalEnv(VecEnv):
             getattr(self, name).copy_(snap[name])
         for k, v in snap["episode_sums"].items():
             self.episode_sums[k].copy_(v)
+        self.trial.load_state_dict(snap["trial"])
         self.common_step = snap["common_step"]
         if self.cfg.domain_rand.enabled:
             self._apply_dr(torch.arange(self.num_envs), self.dr_scales)
@@ -369,14 +377,13 @@ class TraversalEnv(VecEnv):
 
     # --- resets ------------------------------------------------------------------------------------------
     def reset_idx(self, env_ids: torch.Tensor) -> None:
+        """Start new episodes for ``env_ids`` from the task's start / goal distribution."""
         k = len(env_ids)
         if k == 0:
             return
         g, dev = self.generator, self.device
         c = self.cfg.command
-
-        def uniform(lo, hi, *shape):
-            return (lo + (hi - lo) * torch.rand(*shape, generator=g)).to(dev)
+        uniform = self._uniform
 
         if self.scenes is not None:
             if self.curriculum is not None:
@@ -391,6 +398,38 @@ class TraversalEnv(VecEnv):
             goal = start + torch.stack((radius * heading.cos(), radius * heading.sin(), torch.zeros_like(radius)), -1)
             goal[:, 2] = c.goal_height
         yaw = heading + uniform(-c.start_yaw_range, c.start_yaw_range, k)
+        self._reset_envs(env_ids, start, yaw, goal)
+
+    def reset_to(
+        self,
+        env_ids: torch.Tensor,
+        start_xy: torch.Tensor,
+        yaw: torch.Tensor,
+        goal: torch.Tensor,
+        scene_ids: torch.Tensor | None = None,
+        goal_ids: torch.Tensor | None = None,
+    ) -> None:
+        """Reset ``env_ids`` to given trials and refresh the observations (evaluation; no sampling of poses).
+
+        ``start_xy`` (k, 2), ``yaw`` (k,) and ``goal`` (k, 3) are in world coordinates; with a scene set,
+        ``scene_ids`` / ``goal_ids`` (k,) name the scene tile and goal whose field each env reads.
+        """
+        ids = torch.as_tensor(env_ids, device=self.device, dtype=torch.long).reshape(-1)
+        if self.scenes is not None:
+            if scene_ids is None or goal_ids is None:
+                raise ValueError("reset_to on a scene set needs scene_ids and goal_ids")
+            self.scenes.place(ids, scene_ids, goal_ids)
+        start = torch.zeros(len(ids), 3, device=self.device)
+        start[:, :2] = start_xy.to(self.device, torch.float32)
+        self._reset_envs(ids, start, yaw.to(self.device, torch.float32), goal.to(self.device, torch.float32))
+        self._compute_obs()
+
+    def _uniform(self, lo: float, hi: float, *shape: int) -> torch.Tensor:
+        return (lo + (hi - lo) * torch.rand(*shape, generator=self.generator)).to(self.device)
+
+    def _reset_envs(self, env_ids: torch.Tensor, start: torch.Tensor, yaw: torch.Tensor, goal: torch.Tensor) -> None:
+        """Put the robots of ``env_ids`` at ``start`` xy facing ``yaw`` with ``goal``; reset their episode state."""
+        k, dev, uniform = len(env_ids), self.device, self._uniform
         qpos = torch.tensor(home_qpos(self.robot), device=dev, dtype=torch.float64).repeat(k, 1)
         qpos[:, :2] = start[:, :2].double()
         qpos[:, 3:7] = yaw_quat(yaw).double()
@@ -409,9 +448,6 @@ class TraversalEnv(VecEnv):
         self.episode_length_buf[env_ids] = 0
         self.step_count[env_ids] = 0
         self.push_timer[env_ids] = uniform(*self.cfg.push.interval_s, k)
-        self.reached_time[env_ids] = float("inf")
-        self.collided_ever[env_ids] = False
-        self.min_goal_dist[env_ids] = float("inf")
         for v in self.episode_sums.values():
             v[env_ids] = 0.0
         if self.scenes is not None:
@@ -422,7 +458,7 @@ class TraversalEnv(VecEnv):
         else:  # construction: first read of every world
             self._update_state()
             self._update_field()
-        self.min_goal_dist[env_ids] = self.goal_distance[env_ids]
+        self.trial.start(env_ids, self.goal_distance[env_ids], self.state.collision[env_ids], self._fell()[env_ids])
         self._refresh_field_obs(env_ids)
 
     def _randomise(self, env_ids: torch.Tensor) -> None:

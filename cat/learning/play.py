@@ -1,77 +1,67 @@
-"""Roll out a checkpoint for N episodes and report success rate / return (optionally record to rerun)."""
+"""Roll out a checkpoint on the evaluation protocol (``cat.eval``) and report SR / DE / collision / fall rates.
+
+``episodes`` trials are the first ones of the run's trial list (start-major: spread over its scenes and
+goals), each run for ``success.time_s`` from its own reset with no auto-reset, scored by ``cat.eval.metrics``.
+The scenes are the run's own (its ``task.scene_seed`` / ``task.scene_dir``) unless ``scene_seed`` or
+``scene_dir`` say otherwise.
+"""
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 
-import torch
 from tqdm import tqdm
 
-from cat.learning.runs import load_policy, load_run_config, make_env
+from cat.eval.metrics import Summary, summarize
+from cat.eval.runner import EvalCfg, make_eval_env, run_scene_group, run_trials
+from cat.eval.trials import first_trials, flat_trials, scene_trials
+from cat.learning.runs import load_policy, load_run_config
+
+log = logging.getLogger(__name__)
 
 
 @dataclass
 class PlayCfg:
     checkpoint: str = "???"
-    episodes: int = 10
+    episodes: int = 10  # trials
     num_envs: int = 0  # 0 = min(episodes, 64)
     sim: str = ""  # override the run's backend
-    seed: int = 1
+    seed: int = 0  # start-pose seed of the trials (not the run's RL seed)
+    scene_seed: int | None = None  # typical scenes: override the run's task.scene_seed
+    scene_dir: str = ""  # evaluate on these scene folders instead of the run's scenes
     record: str = ""  # .rrd path: record world 0 of the rollout for rerun replay (`rerun <file>`)
 
 
-@dataclass
-class PlayResult:
-    episodes: int
-    success_rate: float
-    mean_return: float
-    distance_error: float
-    collision_rate: float
-
-
-def play(cfg: PlayCfg) -> PlayResult:
+def play(cfg: PlayCfg) -> Summary:
     run_cfg = load_run_config(cfg.checkpoint)
-    run_cfg.seed = cfg.seed
-    if cfg.sim:
-        run_cfg.sim.backend = cfg.sim
+    task = run_cfg.task
+    if cfg.episodes < 1:
+        raise ValueError(f"episodes must be >= 1, got {cfg.episodes}")
+    group = run_scene_group(task, cfg.scene_seed, cfg.scene_dir)
+    opts = EvalCfg(seed=cfg.seed)
+    yaw = opts.start_yaw_range
+    if group is None:
+        trials = first_trials(lambda k: flat_trials(k, cfg.seed, yaw, radius=2.0), cfg.episodes, 8)
+    else:
+        pairs = sum(len(s.goals) for s in group.scenes)
+        trials = first_trials(lambda k: scene_trials(group.scenes, k, cfg.seed, yaw), cfg.episodes, pairs)
     n = cfg.num_envs or min(cfg.episodes, 64)
-    env = make_env(run_cfg, num_envs=n)
+    env = make_eval_env(task, group, n, opts, sim=cfg.sim or run_cfg.sim.backend, device=run_cfg.sim.device)
     policy = load_policy(cfg.checkpoint, env, run_cfg)
-    recorder = None
+    on_step = None
     if cfg.record:
         from cat.viz.record import RolloutRecorder
 
         recorder = RolloutRecorder(cfg.record, env)
-    obs = env.get_observations()
-    ret = torch.zeros(n, device=env.device)
-    returns, success, de, coll = [], [], [], []
-    bar = tqdm(total=cfg.episodes, desc="episodes", unit="ep")
-    with torch.inference_mode():
-        while len(returns) < cfg.episodes:
-            obs, rew, dones, extras = env.step(policy(obs))
-            ret += rew
-            if recorder is not None:
-                recorder.log_step(env)
-            ids = dones.nonzero(as_tuple=False).flatten()
-            if len(ids):
-                ended = extras["episode_end"]
-                for j, i in enumerate(ids.tolist()):
-                    if len(returns) >= cfg.episodes:
-                        break
-                    returns.append(float(ret[i]))
-                    success.append(bool(ended["success"][j]))
-                    de.append(float(ended["distance_error"][j]))
-                    coll.append(bool(ended["collided"][j]))
-                    bar.update(1)
-                ret[ids] = 0.0
-    bar.close()
-    if recorder is not None:
+
+        def on_step(e):  # re-log the obstacles when world 0 starts a trial in another scene
+            if e.step_count[0] == 0:
+                recorder.log_obstacles()
+            recorder.log_step(e)
+
+    with tqdm(total=len(trials), desc="trials", unit="trial") as bar:
+        results = run_trials(env, policy, trials, seed=cfg.seed, progress=bar, on_step=on_step)
+    if cfg.record:
         recorder.close()
-    k = len(returns)
-    return PlayResult(
-        episodes=k,
-        success_rate=sum(success) / k,
-        mean_return=sum(returns) / k,
-        distance_error=sum(de) / k,
-        collision_rate=sum(coll) / k,
-    )
+    return summarize(results)

@@ -64,7 +64,7 @@ def make_env(cfg: TrainCfg, num_envs: int | None = None) -> TraversalEnv:
         if task.scene_dir:
             scenes = SceneSet.from_dir(task.scene_dir, num_envs=n, device=cfg.sim.device, kind=task.scene_kind)
         else:
-            scenes = SceneSet.typical(task.scene_kind, n, task.scene_variants, cfg.seed, device=cfg.sim.device)
+            scenes = SceneSet.typical(task.scene_kind, n, task.scene_variants, task.scene_seed, device=cfg.sim.device)
     return TraversalEnv(task, sim=cfg.sim.backend, device=cfg.sim.device, scenes=scenes, seed=cfg.seed)
 
 
@@ -136,8 +136,13 @@ def load_run_config(checkpoint: str | os.PathLike) -> TrainCfg:
     cfg_file = ckpt.parent / "config.yaml"
     if not cfg_file.is_file():
         raise CheckpointError(f"no config.yaml beside checkpoint {ckpt} (expected {cfg_file})")
+    raw = yaml.safe_load(cfg_file.read_text()) or {}
+    task = raw.get("task") or {}
+    if "scene_seed" not in task and task.get("scene_kind"):
+        # runs from before task.scene_seed built their typical scenes from the RL seed: keep their scenes
+        raw.setdefault("task", {})["scene_seed"] = raw.get("seed", 0)
     schema = OmegaConf.structured(TrainCfg)
-    return OmegaConf.to_object(OmegaConf.merge(schema, yaml.safe_load(cfg_file.read_text())))
+    return OmegaConf.to_object(OmegaConf.merge(schema, raw))
 
 
 def resume_config(checkpoint: str | os.PathLike, overrides: list[str]) -> TrainCfg:

@@ -37,9 +37,10 @@ class RolloutRecorder:
         self.spheres = [i for i in ids if m.geom_type[i] == mujoco.mjtGeom.mjGEOM_SPHERE]
         self.boxes = [i for i in ids if m.geom_type[i] == mujoco.mjtGeom.mjGEOM_BOX]
         self.step_count = 0
-        self._log_obstacles()
+        self.log_obstacles()
 
-    def _log_obstacles(self) -> None:
+    def log_obstacles(self) -> None:
+        """(Re-)log the obstacles of the recorded world's current scene (static)."""
         scenes = getattr(self.env, "scenes", None)
         if scenes is None:
             return

@@ -2,25 +2,41 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import mujoco
 
+from cat.envs.scene import COLLISION_SENSOR
 from cat.envs.sim.base import PhysicsBackend
 
 BACKENDS = ("mujoco", "warp")
 
 
 def make_backend(
-    name: str, model: mujoco.MjModel, num_envs: int, decimation: int, device: str = "cpu"
+    name: str,
+    model: mujoco.MjModel,
+    num_envs: int,
+    decimation: int,
+    device: str = "cpu",
+    max_sensors: Sequence[str] | None = None,
 ) -> PhysicsBackend:
-    """Build the backend ``name`` for ``num_envs`` worlds; ``device`` is a torch device string."""
+    """Build the backend ``name`` for ``num_envs`` worlds; ``device`` is a torch device string.
+
+    ``max_sensors``: sensors reported as their maximum over the substeps of a control step; ``None``: the
+    robot-obstacle contact sensor when the model has one (collisions count on every physics substep).
+    """
+    if max_sensors is None:
+        names = {model.sensor(i).name for i in range(model.nsensor)}
+        max_sensors = (COLLISION_SENSOR,) if COLLISION_SENSOR in names else ()
     if name == "mujoco":
         if not device.startswith("cpu"):
             raise ValueError(f"sim=mujoco runs on the CPU; got device={device!r}. Use sim=warp for CUDA.")
         from cat.envs.sim.mujoco_backend import MujocoBackend
 
-        return MujocoBackend(model, num_envs, decimation)
+        return MujocoBackend(model, num_envs, decimation, max_sensors=max_sensors)
     if name == "warp":
         from cat.envs.sim.warp_backend import WarpBackend
 
-        return WarpBackend(model, num_envs, decimation, device="cpu" if device.startswith("cpu") else device)
+        dev = "cpu" if device.startswith("cpu") else device
+        return WarpBackend(model, num_envs, decimation, device=dev, max_sensors=max_sensors)
     raise ValueError(f"unknown sim backend {name!r}; valid: {', '.join(BACKENDS)}")

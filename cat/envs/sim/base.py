@@ -8,11 +8,16 @@ Timing convention (both backends): ``step`` holds ``ctrl`` for ``decimation`` ph
 ``qvel`` are the state after the last step; ``sensordata`` is computed by MuJoCo at the start of the last
 physics step (one physics step, 5 ms, before ``qpos``), as ``mj_step`` does. ``reset`` recomputes
 sensors for the reset worlds from their new state.
+
+Sensors named in ``max_sensors`` (the robot-obstacle contact count) instead report the maximum over all
+``decimation`` physics steps of the control step, so an event that lasts less than a control step (a
+touch at an intermediate substep) is never lost. Over a trial every simulated state is checked once.
 """
 
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import mujoco
@@ -34,7 +39,7 @@ class PhysicsBackend(ABC):
     #: torch device of all exposed tensors
     device: torch.device
 
-    def __init__(self, model: mujoco.MjModel, num_envs: int, decimation: int):
+    def __init__(self, model: mujoco.MjModel, num_envs: int, decimation: int, max_sensors: Sequence[str] = ()):
         if num_envs < 1:
             raise ValueError(f"num_envs must be >= 1, got {num_envs}")
         if decimation < 1:
@@ -46,6 +51,12 @@ class PhysicsBackend(ABC):
             model.sensor(i).name: SensorSlice(int(model.sensor_adr[i]), int(model.sensor_dim[i]))
             for i in range(model.nsensor)
         }
+        missing = [name for name in max_sensors if name not in self.sensors]
+        if missing:
+            raise KeyError(f"max_sensors {missing} not in the model; model sensors: {sorted(self.sensors)}")
+        #: sensordata columns reduced with max over the substeps of a control step (see the module docstring)
+        slices = [self.sensors[name] for name in max_sensors]
+        self.max_columns = [c for s in slices for c in range(s.adr, s.adr + s.dim)]
 
     # --- state views (N, ...): backends set ``_qpos``, ``_qvel``, ``_sens`` to torch views of their state ----
     _qpos: torch.Tensor

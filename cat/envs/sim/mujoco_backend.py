@@ -1,13 +1,16 @@
 """``sim=mujoco``: N MuJoCo C worlds stepped across threads by ``mujoco.rollout`` (GIL-free, no Python per step).
 
 State lives in one (N, nstate) float64 array (``mjSTATE_FULLPHYSICS``); qpos / qvel / sensordata are torch
-views of host arrays, so the env reads them without copies.
+views of host arrays, so the env reads them without copies. ``rollout`` returns the sensors of every
+substep, so the ``max_sensors`` columns are a max over them. Contacts live in MuJoCo's arena; running out
+of it is a fatal MuJoCo error (``mj_stackAlloc: out of memory``), never a silent drop.
 """
 
 from __future__ import annotations
 
 import copy
 import os
+from collections.abc import Sequence
 
 import mujoco
 import numpy as np
@@ -20,8 +23,15 @@ from cat.envs.sim.base import PhysicsBackend, as_index, state_layout
 class MujocoBackend(PhysicsBackend):
     """MuJoCo C backend: ``decimation`` physics steps per call, threads over worlds."""
 
-    def __init__(self, model: mujoco.MjModel, num_envs: int, decimation: int, nthread: int | None = None):
-        super().__init__(model, num_envs, decimation)
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        num_envs: int,
+        decimation: int,
+        nthread: int | None = None,
+        max_sensors: Sequence[str] = (),
+    ):
+        super().__init__(model, num_envs, decimation, max_sensors)
         self.device = torch.device("cpu")
         self.nthread = nthread or max(1, min(os.cpu_count() or 1, num_envs))
         self._rollout = rollout.Rollout(nthread=self.nthread)
@@ -65,6 +75,9 @@ class MujocoBackend(PhysicsBackend):
         )
         np.copyto(self._state, self._out_state[:, -1])
         np.copyto(self._sens_np, self._out_sens[:, -1])
+        if self.max_columns:
+            cols = self.max_columns
+            self._sens_np[:, cols] = self._out_sens[:, :, cols].max(axis=1)
 
     def reset(self, env_ids: torch.Tensor, qpos: torch.Tensor, qvel: torch.Tensor) -> None:
         ids = as_index(env_ids)

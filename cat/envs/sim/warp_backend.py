@@ -23,14 +23,18 @@ light joints' qvel over 1 s). See ``tests/test_sim_parity.py``. mujoco_warp flag
 (``OverflowType.ITERATIONS``) in ``overflow``; that is routine (float32 vs a 1e-8 tolerance) and not printed.
 
 Contact buffers are preallocated per world (``nconmax`` contacts, ``njmax`` constraint rows): a world that
-exceeds them drops contacts and sets its bit in ``overflow`` (see ``check_overflow``).
+exceeds them drops contacts and sets its bit in ``overflow``. ``step`` and ``reset`` check those bits and
+raise (``check_overflow``), so a dropped contact is an error, never a silent undercount.
+
+``max_sensors`` columns: a small kernel inside the captured decimation loop keeps their running max over the
+substeps and writes it into ``sensordata`` after the last one.
 """
 
 from __future__ import annotations
 
 import contextlib
 import logging
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 
 import mujoco
 import mujoco_warp as mjw
@@ -87,6 +91,22 @@ _ZEROED_FIELDS = (
 _PER_WORLD_FIELDS = ("actuator_gainprm", "actuator_biasprm", "body_mass", "body_inertia", "body_subtreemass")
 
 
+@wp.kernel
+def _substep_max(sens: wp.array2d(dtype=float), cols: wp.array(dtype=int), acc: wp.array2d(dtype=float), first: int):
+    """acc[w, j] = sens[w, cols[j]] on the first substep, else the running max."""
+    w, j = wp.tid()
+    v = sens[w, cols[j]]
+    if first == 0:
+        v = wp.max(v, acc[w, j])
+    acc[w, j] = v
+
+
+@wp.kernel
+def _write_columns(acc: wp.array2d(dtype=float), cols: wp.array(dtype=int), sens: wp.array2d(dtype=float)):
+    w, j = wp.tid()
+    sens[w, cols[j]] = acc[w, j]
+
+
 def resolve_device(device: str | torch.device | None) -> str:
     """Warp device name: ``None`` -> ``"cuda:0"`` when Warp sees a GPU, else ``"cpu"``."""
     n_cuda = wp.get_cuda_device_count()
@@ -125,6 +145,7 @@ class WarpBackend(PhysicsBackend):
             on the CPU, Warp >= 1.19 replays captured launches natively, skipping the Python overhead of
             mujoco_warp's ~140 kernel launches per physics step: 20x faster at N=3, ~1.5-2x at N=64-256).
             ``False``: launch eagerly.
+        max_sensors: sensors reported as their max over the substeps (see ``cat.envs.sim.base``).
     """
 
     def __init__(
@@ -136,8 +157,9 @@ class WarpBackend(PhysicsBackend):
         nconmax: int = DEFAULT_NCONMAX,
         njmax: int = DEFAULT_NJMAX,
         graph: bool = True,
+        max_sensors: Sequence[str] = (),
     ):
-        super().__init__(model, num_envs, decimation)
+        super().__init__(model, num_envs, decimation, max_sensors)
         self.wp_device = wp.get_device(resolve_device(device))
         self.device = torch.device(wp.device_to_torch(self.wp_device))
         self.nconmax, self.njmax = nconmax, njmax
@@ -153,6 +175,8 @@ class WarpBackend(PhysicsBackend):
             self.m.opt.warn_overflow = int(BUFFER_OVERFLOWS)  # print buffer overflows, not solver iterations
             self.d = mjw.make_data(model, nworld=num_envs, nconmax=nconmax, njmax=njmax)
             self._reset_mask = wp.zeros(num_envs, dtype=bool)
+            self._max_cols = wp.array(self.max_columns, dtype=int)
+            self._max_acc = wp.zeros((num_envs, len(self.max_columns)), dtype=float)
         d = self.d
         self._qpos = wp.to_torch(d.qpos)
         self._qvel = wp.to_torch(d.qvel)
@@ -197,8 +221,14 @@ class WarpBackend(PhysicsBackend):
         return self._overflow
 
     def check_overflow(self) -> None:
-        """Raise if any world dropped contacts / constraints (``BUFFER_OVERFLOWS``); syncs with the device."""
-        bits = (self._overflow & int(BUFFER_OVERFLOWS)).cpu()
+        """Raise if any world dropped contacts / constraints (``BUFFER_OVERFLOWS``); syncs with the device.
+
+        Called by ``step`` and ``reset``; cheap when nothing overflowed (one reduction and a host read).
+        """
+        bits = self._overflow & int(BUFFER_OVERFLOWS)
+        if not bool(bits.any()):
+            return
+        bits = bits.cpu()
         bad = torch.nonzero(bits).reshape(-1).tolist()
         if bad:
             flags = {f.name for f in mjw.OverflowType if f & BUFFER_OVERFLOWS and any(bits[i] & f for i in bad)}
@@ -212,6 +242,7 @@ class WarpBackend(PhysicsBackend):
         with self._sim_stream():
             self._ctrl.copy_(ctrl)
             self._launch(self._step_graph, self._physics_steps)
+        self.check_overflow()
 
     def reset(self, env_ids: torch.Tensor, qpos: torch.Tensor, qvel: torch.Tensor) -> None:
         """Reset worlds ``env_ids`` as ``mj_resetData`` + state + ``mj_forward`` would; others keep everything."""
@@ -231,10 +262,19 @@ class WarpBackend(PhysicsBackend):
             self._qvel[ids] = qvel.to(self._qvel).reshape(len(ids), -1)
             self._launch(self._forward_graph, lambda: mjw.forward(self.m, self.d))
             self._sens.copy_(torch.where(self._mask_t[:, None], self._sens, self._sens_saved))
+        self.check_overflow()
 
     def _physics_steps(self) -> None:
-        for _ in range(self.decimation):
+        ncol = len(self.max_columns)
+        for k in range(self.decimation):
             mjw.step(self.m, self.d)
+            if ncol:
+                dims, args = (self.num_envs, ncol), [self.d.sensordata, self._max_cols, self._max_acc, int(k == 0)]
+                wp.launch(_substep_max, dim=dims, inputs=args)
+        if ncol:
+            wp.launch(
+                _write_columns, dim=(self.num_envs, ncol), inputs=[self._max_acc, self._max_cols, self.d.sensordata]
+            )
 
     def _capture(self, fn: Callable[[], None]) -> wp.Graph | None:
         """Graph of ``fn``'s launches (CUDA graph; on the CPU Warp's API-capture replay), ``None`` if disabled."""

@@ -1,0 +1,172 @@
+"""``scripts/eval_table.py``: evaluate every manifest row on Tables I / II and write trials.csv + the tables.
+
+For each row × checkpoint × table column: an env on the column's scenes built from the checkpoint's own
+``config.yaml`` (its observation layout), the same trials for every method (``cat.eval.trials``), run by
+``cat.eval.runner``. Nothing is written until every trial has run; then all files are written to temporary
+names and renamed into place, so an error leaves no half-written output.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import io
+import logging
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+from tqdm import tqdm
+
+from cat.envs.config import SuccessCfg
+from cat.eval.manifest import Manifest, ManifestError, MethodRun, load_manifest
+from cat.eval.metrics import TrialResult
+from cat.eval.runner import EvalCfg, HoldPolicy, SceneGroup, make_eval_env, run_trials
+from cat.eval.table import CSV_COLUMNS, render_latex, render_markdown
+from cat.eval.trials import Trial, scene_trials
+from cat.learning.runs import CheckpointError, load_policy
+from cat.terrain import TYPICAL_KINDS
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class EvalTableCfg:
+    """``scripts/eval_table.py key=value`` options."""
+
+    manifest: str = "???"
+    out: str = "???"
+    trials_per_scene: int = 10  # start poses per (scene, goal); typical scenes have one goal
+    sim: str = "mujoco"  # physics backend for every method (mujoco | warp)
+    device: str = "cpu"
+    seed: int = 0  # start-pose seed
+    max_envs: int = 256  # parallel trials per batch
+    time_s: float = 5.0  # trial length (paper: 5 s)
+    radius: float = 0.1  # success radius (paper: 0.1 m)
+
+
+def scene_groups(manifest: Manifest) -> dict[str, list[SceneGroup]]:
+    """The columns of each requested table, with their scenes and fields (built once, shared by all rows)."""
+    out = {}
+    if manifest.table1 is not None:
+        t1 = manifest.table1
+        out["table1"] = [SceneGroup.typical(k, t1["variants"], t1["scene_seed"]) for k in TYPICAL_KINDS]
+    if manifest.table2:
+        out["table2"] = [SceneGroup.from_dir(name, folder) for name, folder in manifest.table2.items()]
+    return out
+
+
+def check_policy(run: MethodRun, opts: EvalCfg, sim: str, device: str) -> None:
+    """Fail early when a checkpoint does not fit the observation layout of its own config.yaml."""
+    if run.checkpoint is None:
+        return
+    env = make_eval_env(run.config.task, None, 1, opts, sim, device)
+    try:
+        quiet_load_policy(run.checkpoint, env, run)
+    except CheckpointError as err:
+        raise ManifestError(
+            f"method {run.method!r}: checkpoint {run.checkpoint} does not fit the observation layout of its "
+            f"config.yaml ({err})"
+        ) from err
+
+
+def quiet_load_policy(checkpoint: str, env, run: MethodRun):
+    """``load_policy`` without rsl_rl's printout of the networks (stdout carries the tables)."""
+    with contextlib.redirect_stdout(io.StringIO()):
+        return load_policy(checkpoint, env, run.config)
+
+
+def trial_row(run: MethodRun, table: str, group: SceneGroup, t: Trial, r: TrialResult) -> dict[str, str]:
+    """One trials.csv row (strings, fixed precision: the tables are recomputed from exactly these)."""
+    return {
+        "method": run.method,
+        "seed": str(run.seed),
+        "checkpoint": run.checkpoint or "hold",
+        "table": table,
+        "group": group.name,
+        "scene": group.scene_names[t.scene],
+        "goal": str(t.goal),
+        "start": str(t.start),
+        "start_x": f"{t.start_xy[0]:.4f}",
+        "start_y": f"{t.start_xy[1]:.4f}",
+        "start_yaw": f"{t.yaw:.4f}",
+        "goal_x": f"{t.goal_xyz[0]:.4f}",
+        "goal_y": f"{t.goal_xyz[1]:.4f}",
+        "success": str(int(r.success)),
+        "de": f"{r.de:.4f}",
+        "collided": str(int(r.collided)),
+        "fell": str(int(r.fell)),
+        "reach_time": "" if math.isinf(r.reach_time) else f"{r.reach_time:.2f}",
+    }
+
+
+def evaluate(cfg: EvalTableCfg) -> tuple[list[dict[str, str]], dict[str, str]]:
+    """(trials.csv rows, {file name: content}) for the manifest; writes nothing."""
+    if cfg.trials_per_scene < 1:
+        raise ManifestError(f"trials_per_scene must be >= 1, got {cfg.trials_per_scene}")
+    manifest = load_manifest(cfg.manifest)
+    opts = EvalCfg(
+        starts=cfg.trials_per_scene, seed=cfg.seed, max_envs=cfg.max_envs, success=SuccessCfg(cfg.radius, cfg.time_s)
+    )
+    groups = scene_groups(manifest)
+    for runs in manifest.methods.values():
+        for run in runs:
+            check_policy(run, opts, cfg.sim, cfg.device)
+    trials = {
+        (table, g.name): scene_trials(g.scenes, opts.starts, opts.seed, opts.start_yaw_range)
+        for table, gl in groups.items()
+        for g in gl
+    }
+    runs = [run for rs in manifest.methods.values() for run in rs]
+    total = len(runs) * sum(len(t) for t in trials.values())
+    rows: list[dict[str, str]] = []
+    with tqdm(total=total, desc="trials", unit="trial") as bar:
+        for run in runs:
+            for table, gl in groups.items():
+                for group in gl:
+                    ts = trials[table, group.name]
+                    n = min(len(ts), opts.max_envs)
+                    env = make_eval_env(run.config.task, group, n, opts, cfg.sim, cfg.device)
+                    if run.checkpoint is None:
+                        policy = HoldPolicy(env.num_actions)
+                    else:
+                        policy = quiet_load_policy(run.checkpoint, env, run)
+                    bar.set_postfix_str(f"{run.method}/{run.seed} {table} {group.name}")
+                    results = run_trials(env, policy, ts, seed=opts.seed, progress=bar)
+                    rows += [trial_row(run, table, group, t, r) for t, r in zip(ts, results, strict=True)]
+                    del env
+    methods = list(manifest.methods)
+    files = {"trials.csv": to_csv(rows)}
+    note = (
+        f"{opts.starts} start pose(s) per scene goal; success: within {cfg.radius:g} m within {cfg.time_s:g} s, "
+        f"no contact, no fall; sim={cfg.sim}."
+    )
+    for table, gl in groups.items():
+        names = [g.name for g in gl]
+        files[f"{table}.md"] = render_markdown(rows, table, methods, names, note)
+        files[f"{table}.tex"] = render_latex(rows, table, methods, names, note)
+    return rows, files
+
+
+def to_csv(rows: list[dict[str, str]]) -> str:
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=CSV_COLUMNS, lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows)
+    return buf.getvalue()
+
+
+def write_atomically(out: str | os.PathLike, files: dict[str, str]) -> None:
+    """Write every file to a temporary name first, then rename them all into place."""
+    folder = Path(out)
+    folder.mkdir(parents=True, exist_ok=True)
+    tmp = {name: folder / f".{name}.tmp-{os.getpid()}" for name in files}
+    try:
+        for name, text in files.items():
+            tmp[name].write_text(text)
+        for name in files:
+            os.replace(tmp[name], folder / name)
+    finally:
+        for path in tmp.values():
+            path.unlink(missing_ok=True)

@@ -1,0 +1,143 @@
+"""The ``scripts/eval_table.py`` manifest: which checkpoints form which table row, which tables to build.
+
+```yaml
+methods:                  # table row -> one checkpoint per training seed; `hold` = built-in reference policy
+  Ours: [runs/a/model_1500.pt, runs/b/model_1500.pt]
+  Hold: [hold]
+table1: {scene_seed: 0}   # optional: the 8 typical types, 10 variants each (paper Table I); `variants: n`
+table2:                   # optional: unseen scene folders (paper Table II), one column per entry
+  easy: data/test_unseen/easy
+  hard: data/test_unseen/hard
+```
+
+Everything is checked before any trial runs: unknown keys, a missing checkpoint or ``config.yaml``, an empty
+scene folder, checkpoints of one row trained on different observation layouts. Errors are ``ManifestError``
+with one line naming the offending entry.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import yaml
+
+from cat.learning.config import TrainCfg
+from cat.learning.runs import CheckpointError, load_run_config
+
+HOLD = "hold"
+TOP_KEYS = ("methods", "table1", "table2")
+TABLE1_KEYS = ("scene_seed", "variants")
+
+
+class ManifestError(ValueError):
+    """A manifest entry that cannot be evaluated; the message names it."""
+
+
+@dataclass
+class MethodRun:
+    """One checkpoint of a row (``checkpoint`` None: the hold policy) and its run config."""
+
+    method: str
+    seed: int  # index of the checkpoint in the row (training seed slot)
+    checkpoint: str | None
+    config: TrainCfg
+
+
+@dataclass
+class Manifest:
+    methods: dict[str, list[MethodRun]]
+    table1: dict | None = None  # {"scene_seed": int, "variants": int}
+    table2: dict[str, str] = field(default_factory=dict)  # column -> scene folder
+
+
+def obs_layout(cfg: TrainCfg) -> tuple:
+    """What fixes the policy's input: the actor's observation terms, in order, and whether the field block is live."""
+    return tuple(cfg.task.observations.actor), bool(cfg.task.field_obs.enabled)
+
+
+def load_manifest(path: str | os.PathLike) -> Manifest:
+    """Parse and check ``path`` (relative paths inside resolve against the current directory)."""
+    p = Path(path)
+    if not p.is_file():
+        raise ManifestError(f"manifest not found: {p}")
+    try:
+        raw = yaml.safe_load(p.read_text())
+    except yaml.YAMLError as err:
+        raise ManifestError(f"manifest {p} is not valid YAML: {err}") from err
+    if not isinstance(raw, dict):
+        raise ManifestError(f"manifest {p} must be a mapping with keys {', '.join(TOP_KEYS)}")
+    unknown = sorted(set(raw) - set(TOP_KEYS))
+    if unknown:
+        raise ManifestError(f"unknown manifest key {unknown[0]!r}; valid: {', '.join(TOP_KEYS)}")
+    methods = _methods(raw.get("methods"))
+    table1 = _table1(raw.get("table1")) if "table1" in raw else None
+    table2 = _table2(raw.get("table2")) if "table2" in raw else {}
+    if table1 is None and not table2:
+        raise ManifestError("manifest asks for no table: add table1 and/or table2")
+    return Manifest(methods, table1, table2)
+
+
+def _methods(raw) -> dict[str, list[MethodRun]]:
+    if not isinstance(raw, dict) or not raw:
+        raise ManifestError("manifest needs 'methods': a mapping of row name -> list of checkpoints (or [hold])")
+    out = {}
+    for name, entries in raw.items():
+        if isinstance(entries, str):
+            entries = [entries]
+        if not isinstance(entries, list) or not entries:
+            raise ManifestError(f"method {name!r}: expected a list of checkpoints (or [hold]), got {entries!r}")
+        runs = [_method_run(str(name), i, str(e)) for i, e in enumerate(entries)]
+        if len(runs) > 1 and any(r.checkpoint is None for r in runs):
+            raise ManifestError(f"method {name!r}: 'hold' is a row of its own, not mixed with checkpoints")
+        layout = obs_layout(runs[0].config)
+        for r in runs[1:]:
+            if obs_layout(r.config) != layout:
+                raise ManifestError(
+                    f"method {name!r}: checkpoint {r.checkpoint} observation layout {obs_layout(r.config)} "
+                    f"differs from the method's ({runs[0].checkpoint}: {layout})"
+                )
+        out[str(name)] = runs
+    return out
+
+
+def _method_run(method: str, seed: int, entry: str) -> MethodRun:
+    if entry == HOLD:
+        return MethodRun(method, seed, None, TrainCfg())
+    if not (entry.endswith(".pt") or os.sep in entry or "/" in entry):
+        raise ManifestError(
+            f"method {method!r}: unknown method {entry!r} (a checkpoint path model_*.pt or the built-in 'hold')"
+        )
+    try:
+        cfg = load_run_config(entry)
+    except CheckpointError as err:
+        raise ManifestError(f"method {method!r}: {err}") from err
+    return MethodRun(method, seed, entry, cfg)
+
+
+def _table1(raw) -> dict:
+    if not isinstance(raw, dict):
+        raise ManifestError(f"table1 must be a mapping like {{scene_seed: 0}}, got {raw!r}")
+    unknown = sorted(set(raw) - set(TABLE1_KEYS))
+    if unknown:
+        raise ManifestError(f"unknown table1 key {unknown[0]!r}; valid: {', '.join(TABLE1_KEYS)}")
+    out = {"scene_seed": raw.get("scene_seed", 0), "variants": raw.get("variants", 10)}
+    for k, v in out.items():
+        if not isinstance(v, int) or isinstance(v, bool) or (k == "variants" and v < 1):
+            raise ManifestError(f"table1 {k} must be a {'positive ' if k == 'variants' else ''}integer, got {v!r}")
+    return out
+
+
+def _table2(raw) -> dict[str, str]:
+    if not isinstance(raw, dict) or not raw:
+        raise ManifestError(f"table2 must map column names to scene folders (easy: ..., hard: ...), got {raw!r}")
+    out = {}
+    for name, folder in raw.items():
+        root = Path(str(folder))
+        if not root.is_dir():
+            raise ManifestError(f"table2 {name!r}: scene folder not found: {root}")
+        if not any(root.rglob("scene.json")):
+            raise ManifestError(f"table2 {name!r}: no scenes (scene.json) under {root}")
+        out[str(name)] = str(root)
+    return out

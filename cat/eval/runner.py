@@ -1,0 +1,199 @@
+"""Run trials: each env runs exactly one trial at a time, ``success.time_s`` of simulated time, no auto-reset.
+
+A batch of up to N trials is placed with ``TraversalEnv.reset_to`` (env i gets trial i of the batch), the env
+steps the trial window (250 control steps for 5 s at 50 Hz) with auto-reset off, and each env's
+``TrialMetrics`` (``cat.eval.metrics``, the same object the training log reads) gives the result. Envs left
+over in the last batch keep running their previous (finished) trial and are not read.
+
+Evaluation settings (``EvalCfg``): pushes and domain randomisation off (a nominal robot, as the paper's
+tables do not say otherwise), observation noise as the policy was trained, the curriculum off. The success
+rule (0.1 m, 5 s) and the fall thresholds are the evaluation's, not each run's, so every method is scored by
+the same rule. Random
+draws at reset (joint offsets, gait phase) and the observation noise come from streams seeded per batch,
+so the same trials on the same machine give the same results.
+"""
+
+from __future__ import annotations
+
+import copy
+import logging
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import torch
+
+from cat.envs.config import EnvCfg, SuccessCfg, TerminationCfg
+from cat.envs.scene_set import SceneSet, SceneSetError, scene_fields
+from cat.envs.traversal_env import TraversalEnv
+from cat.eval.metrics import TrialResult
+from cat.eval.trials import Trial
+from cat.fields import Field
+from cat.terrain import Scene, typical_variants
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class EvalCfg:
+    """How trials are drawn, run and scored (the same for every method)."""
+
+    starts: int = 10  # start poses per (scene, goal)
+    seed: int = 0  # start-pose seed (trials) and the per-batch reset / noise streams
+    start_yaw_range: float = 1.5708  # start yaw within +-this of the heading to the goal [rad]
+    success: SuccessCfg = field(default_factory=SuccessCfg)  # paper: 0.1 m within 5 s
+    fall: TerminationCfg = field(default_factory=TerminationCfg)  # fall thresholds (min_base_height, max_tilt)
+    max_envs: int = 256  # envs per batch (fewer when there are fewer trials)
+    noise: bool = True  # keep the observation noise the policy was trained with
+    domain_rand: bool = False
+    push: bool = False
+
+
+@dataclass
+class SceneGroup:
+    """A named list of scenes evaluated together (a table column), with their per-goal fields."""
+
+    name: str
+    scenes: list[Scene]
+    scene_names: list[str]
+    fields: list[list[Field]] = field(repr=False)
+
+    @classmethod
+    def typical(cls, kind: str, variants: int, scene_seed: int) -> SceneGroup:
+        """The typical scenes of ``kind`` (seeds scene_seed..+variants-1), exactly as training builds them."""
+        scenes = typical_variants(kind, variants, scene_seed)
+        names = [f"{kind}_{i:02d}" for i in range(variants)]
+        return cls(kind, scenes, names, [scene_fields(s, None, None) for s in scenes])
+
+    @classmethod
+    def from_dir(cls, name: str, path: str | Path) -> SceneGroup:
+        """Every scene folder under ``path`` (precomputed fields used when present)."""
+        root = Path(path)
+        if not root.is_dir():
+            raise SceneSetError(f"scene folder not found: {root}")
+        folders = sorted(p.parent for p in root.rglob("scene.json"))
+        if not folders:
+            raise SceneSetError(f"no scenes (scene.json) under {root}")
+        scenes = [Scene.load(f) for f in folders]
+        names = [str(f.relative_to(root)) for f in folders]
+        return cls(name, scenes, names, [scene_fields(s, f, None) for s, f in zip(scenes, folders, strict=True)])
+
+    def scene_set(self, num_envs: int, device: str) -> SceneSet:
+        return SceneSet(self.scenes, self.fields, num_envs, device)
+
+
+def run_scene_group(task: EnvCfg, scene_seed: int | None = None, scene_dir: str = "") -> SceneGroup | None:
+    """The scenes a run trained on (``None``: flat ground), unless ``scene_seed`` / ``scene_dir`` override them.
+
+    Typical tasks rebuild their variants from ``task.scene_seed`` (not the RL seed); dataset tasks read
+    ``task.scene_dir`` filtered to ``task.scene_kind``.
+    """
+    if scene_dir or task.scene_dir:
+        group = SceneGroup.from_dir("scenes", scene_dir or task.scene_dir)
+        if task.scene_kind and not scene_dir:
+            keep = [i for i, s in enumerate(group.scenes) if s.kind == task.scene_kind]
+            if not keep:
+                raise SceneSetError(f"no scenes of kind {task.scene_kind!r} under {task.scene_dir}")
+            pick = (
+                [group.scenes[i] for i in keep],
+                [group.scene_names[i] for i in keep],
+                [group.fields[i] for i in keep],
+            )
+            group = SceneGroup(task.scene_kind, *pick)
+        return group
+    if task.scene_kind:
+        seed = task.scene_seed if scene_seed is None else scene_seed
+        return SceneGroup.typical(task.scene_kind, task.scene_variants, seed)
+    return None
+
+
+def eval_task(task: EnvCfg, num_envs: int, cfg: EvalCfg) -> EnvCfg:
+    """The run's task config with the evaluation settings (observation layout and success rule unchanged)."""
+    t = copy.deepcopy(task)
+    t.num_envs = num_envs
+    t.noise.enabled = t.noise.enabled and cfg.noise
+    t.domain_rand.enabled = cfg.domain_rand
+    t.push.enabled = cfg.push
+    t.curriculum.enabled = False
+    t.success = copy.deepcopy(cfg.success)
+    t.terminations.min_base_height = cfg.fall.min_base_height
+    t.terminations.max_tilt = cfg.fall.max_tilt
+    t.episode_length_s = max(t.episode_length_s, t.success.time_s + 1.0)  # no time-out inside a trial
+    return t
+
+
+def make_eval_env(
+    task: EnvCfg, group: SceneGroup | None, num_envs: int, cfg: EvalCfg, sim: str = "mujoco", device: str = "cpu"
+) -> TraversalEnv:
+    """An env for ``task`` on ``group``'s scenes (``None``: flat ground), auto-reset off."""
+    scenes = group.scene_set(num_envs, device) if group is not None else None
+    env = TraversalEnv(eval_task(task, num_envs, cfg), sim=sim, device=device, scenes=scenes, seed=cfg.seed)
+    env.auto_reset = False
+    return env
+
+
+class HoldPolicy:
+    """The reference policy: zero actions, so the PD targets stay at the default pose."""
+
+    def __init__(self, num_actions: int):
+        self.num_actions = num_actions
+
+    def __call__(self, obs) -> torch.Tensor:
+        return torch.zeros(obs.batch_size[0], self.num_actions, device=obs.device)
+
+
+def place(env: TraversalEnv, env_ids: torch.Tensor, trials: Sequence[Trial]) -> None:
+    """Reset ``env_ids`` to ``trials`` (scene frame -> the env's world frame)."""
+    start = torch.tensor([t.start_xy for t in trials], dtype=torch.float32)
+    goal = torch.tensor([t.goal_xyz for t in trials], dtype=torch.float32)
+    yaw = torch.tensor([t.yaw for t in trials], dtype=torch.float32)
+    if env.scenes is None:
+        env.reset_to(env_ids, start, yaw, goal)
+        return
+    scene_ids = torch.tensor([t.scene for t in trials])
+    goal_ids = torch.tensor([t.goal for t in trials])
+    ss = env.scenes
+    env.reset_to(env_ids, ss.to_world(scene_ids, start), yaw, ss.to_world(scene_ids, goal), scene_ids, goal_ids)
+
+
+def run_trials(
+    env: TraversalEnv,
+    policy: Callable,
+    trials: Sequence[Trial],
+    seed: int = 0,
+    progress=None,
+    on_step: Callable[[TraversalEnv], None] | None = None,
+) -> list[TrialResult]:
+    """Results of ``trials`` in order; ``progress`` (tqdm-like) advances per finished trial."""
+    if env.auto_reset:
+        raise ValueError("run_trials needs an env with auto_reset = False (see make_eval_env)")
+    steps = env.trial.window
+    results: list[TrialResult] = []
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)  # small per-step tensors: one thread is much faster on a few shared cores
+    try:
+        with torch.random.fork_rng(), torch.inference_mode():
+            _run_batches(env, policy, trials, seed, steps, results, progress, on_step)
+    finally:
+        torch.set_num_threads(threads)
+    return results
+
+
+def _run_batches(env, policy, trials, seed, steps, results, progress, on_step) -> None:
+    n = env.num_envs
+    for b, first in enumerate(range(0, len(trials), n)):
+        batch = trials[first : first + n]
+        ids = torch.arange(len(batch), device=env.device)
+        env.generator.manual_seed(seed * 1_000_003 + b)  # reset draws, per batch
+        torch.manual_seed(seed * 1_000_003 + b)  # observation noise
+        place(env, ids, batch)
+        obs = env.get_observations()
+        if on_step is not None:
+            on_step(env)
+        for _ in range(steps):
+            obs, _, _, _ = env.step(policy(obs))
+            if on_step is not None:
+                on_step(env)
+        results += env.trial.results(ids)
+        if progress is not None:
+            progress.update(len(batch))

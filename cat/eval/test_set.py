@@ -1,0 +1,119 @@
+"""The unseen Table II test set: 30 indoor crops, 15 easy / 15 hard by obstacle density (paper §IV-B).
+
+Built deterministically, from random streams no training run can draw from: indoor crops of
+``make_indoor(seed, stream=TEST_STREAM)`` for seeds 0, 1, 2, ... (a seed whose house yields no valid crop is
+skipped) until ``num_scenes`` exist. Training scenes use stream 0 (``[seed, 4241]``); the test stream keys
+its generator with ``[seed, 4241, 1]``, a different seed sequence for every seed, so the houses, crops,
+starts and goals of the test set never occur in training.
+
+Split rule: obstacle density = ``Scene.difficulty`` of an indoor crop, the fraction of the crop's floor a
+humanoid cannot stand on (furniture footprints, eroded clearance). The scenes are ranked by (density,
+seed); the lower half is ``easy``, the upper half ``hard``. Each scene keeps at most ``goals_per_scene`` of
+its reachable goals (evenly spaced through its list), so every scene weighs about the same and the field
+bank stays small (a 5 × 5 × 2 m field is 25 MB).
+
+Layout: ``<out>/easy/test_<seed>/`` and ``<out>/hard/test_<seed>/`` scene folders with precomputed fields,
+and ``<out>/index.json`` (seed, density, split, goals, rule). Rebuild: ``python scripts/gen_test_set.py``.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import shutil
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from cat.terrain import Scene, SceneError, make_indoor
+from cat.terrain.dataset import DONE_FILE, build_fields
+
+log = logging.getLogger(__name__)
+
+TEST_STREAM = 1
+SPLIT_RULE = (
+    "obstacle density = Scene.difficulty of the indoor crop (fraction of its floor a humanoid cannot stand on); "
+    "scenes ranked by (density, seed): lower half easy, upper half hard"
+)
+
+
+@dataclass
+class UnseenSetCfg:
+    """``scripts/gen_test_set.py`` options."""
+
+    out: str = "data/test_unseen"
+    num_scenes: int = 30  # split in half: easy / hard
+    goals_per_scene: int = 4
+    max_seeds: int = 200  # give up after this many seeds
+    fields: bool = True  # precompute the per-goal fields
+
+
+def candidate(seed: int, goals_per_scene: int) -> Scene | None:
+    """The test-stream indoor crop of ``seed`` with at most ``goals_per_scene`` goals (None: no valid crop)."""
+    try:
+        scene = make_indoor(seed, stream=TEST_STREAM)
+    except SceneError as err:
+        log.info("test seed %d skipped: %s", seed, err)
+        return None
+    g = len(scene.goals)
+    if g > goals_per_scene:
+        keep = np.unique(np.round(np.linspace(0, g - 1, goals_per_scene)).astype(int))
+        scene.goals = scene.goals[keep]
+    scene.meta["test_stream"] = TEST_STREAM
+    return scene
+
+
+def split(scenes: dict[int, Scene]) -> dict[str, list[int]]:
+    """Seeds ranked by (density, seed): lower half easy, upper half hard."""
+    ranked = sorted(scenes, key=lambda s: (scenes[s].difficulty, s))
+    half = len(ranked) // 2
+    return {"easy": ranked[:half], "hard": ranked[half:]}
+
+
+def build_test_set(cfg: UnseenSetCfg, progress: bool = True) -> list[dict]:
+    """Generate (or re-use, when complete and identical) the test set under ``cfg.out``; returns the index."""
+    if cfg.num_scenes < 2 or cfg.num_scenes % 2:
+        raise ValueError(f"num_scenes must be an even number >= 2, got {cfg.num_scenes}")
+    scenes: dict[int, Scene] = {}
+    bar = tqdm(total=cfg.num_scenes, desc="test scenes", unit="scene", disable=not progress)
+    for seed in range(cfg.max_seeds):
+        if len(scenes) == cfg.num_scenes:
+            break
+        scene = candidate(seed, cfg.goals_per_scene)
+        if scene is not None:
+            scenes[seed] = scene
+            bar.update(1)
+    bar.close()
+    if len(scenes) < cfg.num_scenes:
+        raise SceneError(f"only {len(scenes)} valid test scenes in {cfg.max_seeds} seeds")
+    out = Path(cfg.out)
+    index = []
+    for group, seeds in split(scenes).items():
+        for seed in seeds:
+            folder = out / group / f"test_{seed:03d}"
+            _write(scenes[seed], folder, cfg.fields)
+            s = scenes[seed]
+            index.append({"folder": str(folder.relative_to(out)), "split": group, "seed": seed,
+                          "density": round(float(s.difficulty), 6), "goals": len(s.goals)})  # fmt: skip
+    for group in ("easy", "hard"):  # folders of an earlier build with other settings
+        keep = {Path(e["folder"]).name for e in index if e["split"] == group}
+        for old in sorted((out / group).glob("test_*")):
+            if old.name not in keep:
+                shutil.rmtree(old)
+    meta = {"rule": SPLIT_RULE, "test_stream": TEST_STREAM, "config": asdict(cfg), "scenes": index}
+    (out / "index.json").write_text(json.dumps(meta, indent=1))
+    return index
+
+
+def _write(scene: Scene, folder: Path, fields: bool) -> None:
+    """Save ``scene`` (unless an identical complete copy is there) and its fields."""
+    if (folder / DONE_FILE).is_file():
+        old = Scene.load(folder)
+        if np.array_equal(old.goals, scene.goals) and old.seed == scene.seed:
+            return
+        shutil.rmtree(folder)
+    scene.save(folder)
+    if not fields or build_fields(scene, folder):
+        (folder / DONE_FILE).write_text("ok\n")

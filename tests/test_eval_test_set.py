@@ -1,0 +1,35 @@
+"""The unseen Table II test set: deterministic, split by density, drawn from a stream training never uses."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+from cat.eval.test_set import UnseenSetCfg, build_test_set, candidate
+from cat.terrain import Scene, make_indoor
+
+
+def test_test_set_is_deterministic_split_and_held_out(tmp_path):
+    cfg = UnseenSetCfg(out=str(tmp_path / "a"), num_scenes=4, fields=False)
+    index = build_test_set(cfg, progress=False)
+    again = build_test_set(UnseenSetCfg(out=str(tmp_path / "b"), num_scenes=4, fields=False), progress=False)
+    assert index == again
+    for e in index:
+        a, b = Scene.load(tmp_path / "a" / e["folder"]), Scene.load(tmp_path / "b" / e["folder"])
+        np.testing.assert_array_equal(a.mesh.vertices, b.mesh.vertices)
+        np.testing.assert_array_equal(a.goals, b.goals)
+        assert 1 <= len(a.goals) <= cfg.goals_per_scene
+        assert (tmp_path / "a" / e["folder"] / "done").is_file()
+    easy = [e["density"] for e in index if e["split"] == "easy"]
+    hard = [e["density"] for e in index if e["split"] == "hard"]
+    assert len(easy) == len(hard) == 2 and max(easy) <= min(hard)
+    meta = json.loads((tmp_path / "a" / "index.json").read_text())
+    assert "lower half easy" in meta["rule"] and meta["test_stream"] == 1
+    # a training scene with the same seed (stream 0) is a different scene
+    seed = index[0]["seed"]
+    test_scene = candidate(seed, goals_per_scene=100)
+    train_scene = make_indoor(seed)
+    assert test_scene.meta["source"] != train_scene.meta["source"] or not np.array_equal(
+        test_scene.mesh.vertices, train_scene.mesh.vertices
+    )

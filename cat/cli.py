@@ -151,3 +151,29 @@ def run(script: Script, argv: list[str]) -> int:
         return 2
     except BrokenPipeError:  # output piped into head & co.
         return 0
+
+
+def dataclass_loader(schema, required: tuple[str, ...] = ()) -> Callable[[list[str]], Any]:
+    """``load`` for scripts whose config is one dataclass (no config groups): dotlist overrides, checked.
+
+    ``required`` keys have no default (``""`` / ``"???"`` in the schema) and must be given.
+    """
+    valid = valid_keys(schema)
+
+    def load(overrides: list[str]):
+        for item in overrides:
+            key = item.split("=", 1)[0]
+            if key not in valid:
+                raise CliError(unknown_key_message(key, valid))
+        try:
+            merged = OmegaConf.merge(OmegaConf.structured(schema), OmegaConf.from_dotlist(overrides))
+            missing = [k for k in required if str(OmegaConf.select(merged, k, default="")) in ("", "???")]
+            if missing:
+                raise CliError(f"missing {', '.join(k + '=' for k in missing)} (see --help)")
+            return OmegaConf.to_object(merged)
+        except CliError:
+            raise
+        except Exception as err:  # omegaconf: a value of the wrong type
+            raise CliError(str(err).splitlines()[0]) from None
+
+    return load

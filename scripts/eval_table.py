@@ -7,39 +7,17 @@ format is in ``cat/eval/manifest.py`` and docs/evaluation.md.
 
 from __future__ import annotations
 
-import logging
 import sys
 
-from omegaconf import OmegaConf
-
+from cat.cli import Script, dataclass_loader, run
 from cat.envs.scene_set import SceneSetError
 from cat.eval.evaluate import EvalTableCfg, evaluate, write_atomically
 from cat.eval.manifest import ManifestError
 from cat.learning.runs import CheckpointError
 
 
-def main(argv: list[str]) -> int:
-    logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
-    log = logging.getLogger("eval_table")
-    valid = ", ".join(EvalTableCfg.__dataclass_fields__)
-    for item in argv:
-        if "=" not in item or item.split("=", 1)[0] not in EvalTableCfg.__dataclass_fields__:
-            log.error("bad argument %r: expected key=value with key in: %s", item, valid)
-            return 2
-    try:
-        cfg = OmegaConf.to_object(OmegaConf.merge(OmegaConf.structured(EvalTableCfg), OmegaConf.from_dotlist(argv)))
-    except Exception as err:
-        log.error("bad arguments %s: %s (valid keys: %s)", argv, err, valid)
-        return 2
-    for key in ("manifest", "out"):
-        if getattr(cfg, key) == "???":
-            log.error("missing %s=<%s>", key, "manifest.yaml" if key == "manifest" else "output folder")
-            return 2
-    try:
-        _, files = evaluate(cfg)
-    except (ManifestError, CheckpointError, SceneSetError, ValueError) as err:
-        log.error("%s", err)
-        return 2
+def _job(cfg: EvalTableCfg) -> int:
+    _, files = evaluate(cfg)
     write_atomically(cfg.out, files)
     for name in sorted(files):
         if name.endswith(".md"):
@@ -47,5 +25,15 @@ def main(argv: list[str]) -> int:
     return 0
 
 
+SCRIPT = Script(
+    name="eval_table",
+    doc=__doc__,
+    load=dataclass_loader(EvalTableCfg, required=("manifest", "out")),
+    job=_job,
+    run_dir_key="out",
+    keys=list(EvalTableCfg.__dataclass_fields__),
+    errors=(ManifestError, CheckpointError, SceneSetError, ValueError),
+)
+
 if __name__ == "__main__":
-    sys.exit(main(sys.argv[1:]))
+    sys.exit(run(SCRIPT, sys.argv[1:]))

@@ -9,21 +9,21 @@ The scenes are the run's own (its ``task.scene_seed`` / ``task.scene_dir``) unle
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from tqdm import tqdm
 
 from cat.eval.metrics import Summary, summarize
 from cat.eval.runner import EvalCfg, make_eval_env, run_scene_group, run_trials
 from cat.eval.trials import first_trials, flat_trials, scene_trials
-from cat.learning.runs import load_policy, load_run_config
+from cat.learning.runs import load_policy, load_run_config, resolve_checkpoint
 
 log = logging.getLogger(__name__)
 
 
 @dataclass
 class PlayCfg:
-    checkpoint: str = "???"
+    checkpoint: str = "???"  # model_<it>.pt, or a run folder (its latest checkpoint)
     episodes: int = 10  # trials
     num_envs: int = 0  # 0 = min(episodes, 64)
     sim: str = ""  # override the run's backend
@@ -34,6 +34,8 @@ class PlayCfg:
 
 
 def play(cfg: PlayCfg) -> Summary:
+    """``cfg.checkpoint`` may be a run folder: its latest checkpoint plays."""
+    cfg = replace(cfg, checkpoint=str(resolve_checkpoint(cfg.checkpoint)))
     run_cfg = load_run_config(cfg.checkpoint)
     task = run_cfg.task
     if cfg.episodes < 1:

@@ -128,9 +128,22 @@ def save_config(cfg: TrainCfg, run_dir: Path) -> None:
     (run_dir / "config.yaml").write_text(OmegaConf.to_yaml(OmegaConf.structured(cfg)))
 
 
+def resolve_checkpoint(path: str | os.PathLike) -> Path:
+    """A checkpoint file, or a run folder's latest ``model_<it>.pt`` (highest iteration)."""
+    path = Path(path)
+    if path.is_dir():
+        models = sorted(
+            path.glob("model_*.pt"), key=lambda p: int(p.stem.split("_")[1]) if p.stem[6:].isdigit() else -1
+        )
+        if not models:
+            raise CheckpointError(f"run folder {path} holds no model_<iteration>.pt")
+        return models[-1]
+    return path
+
+
 def load_run_config(checkpoint: str | os.PathLike) -> TrainCfg:
     """The resolved config saved beside a checkpoint."""
-    ckpt = Path(checkpoint)
+    ckpt = resolve_checkpoint(checkpoint)
     if not ckpt.is_file():
         raise CheckpointError(f"checkpoint not found: {ckpt}")
     cfg_file = ckpt.parent / "config.yaml"

@@ -66,7 +66,7 @@ class NoiseCfg:
 
 @dataclass
 class DomainRandCfg:
-    """Per-episode physics randomisation (DESIGN.md §5)."""
+    """Per-episode physics randomisation."""
 
     enabled: bool = False
     kp_scale: tuple[float, float] = (0.75, 1.25)

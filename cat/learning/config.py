@@ -16,7 +16,7 @@ class SimCfg:
 
 @dataclass
 class AlgoCfg:
-    """PPO (rsl_rl) settings; defaults follow the authors' release where known (DESIGN.md §5)."""
+    """PPO (rsl_rl) settings; defaults follow the authors' release where known."""
 
     num_steps_per_env: int = 24
     learning_rate: float = 3.0e-4

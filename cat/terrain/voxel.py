@@ -1,6 +1,6 @@
 """Voxel grids for scenes: occupancy from meshes, humanoid traversability, reachability, re-meshing.
 
-One convention everywhere (DESIGN §4): voxel ``(i, j, k)`` has its centre at
+One convention everywhere: voxel ``(i, j, k)`` has its centre at
 ``origin + (idx + 0.5) * voxel``. Reachability is a 2.5-D model of a humanoid: a floor column is
 *passable* when, above some free voxel no higher than ``step_height`` (a hurdle it can step over), there
 is a free vertical run of at least ``headroom`` (room for a crouched G1), and, if the floor itself is

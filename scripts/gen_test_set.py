@@ -11,32 +11,31 @@ import logging
 import sys
 import time
 
-from omegaconf import OmegaConf
-
+from cat.cli import Script, dataclass_loader, run
 from cat.eval.test_set import UnseenSetCfg, build_test_set
 from cat.terrain import SceneError
 
+log = logging.getLogger("gen_test_set")
 
-def main(argv: list[str]) -> int:
-    logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
-    log = logging.getLogger("gen_test_set")
-    valid = ", ".join(UnseenSetCfg.__dataclass_fields__)
-    for item in argv:
-        if "=" not in item or item.split("=", 1)[0] not in UnseenSetCfg.__dataclass_fields__:
-            log.error("bad argument %r: expected key=value with key in: %s", item, valid)
-            return 2
-    try:
-        cfg = OmegaConf.to_object(OmegaConf.merge(OmegaConf.structured(UnseenSetCfg), OmegaConf.from_dotlist(argv)))
-        t0 = time.perf_counter()
-        index = build_test_set(cfg)
-    except (ValueError, SceneError) as err:
-        log.error("%s", err)
-        return 2
+
+def _job(cfg: UnseenSetCfg) -> int:
+    t0 = time.perf_counter()
+    index = build_test_set(cfg)
     easy = sum(e["split"] == "easy" for e in index)
     log.info("wrote %d scenes (%d easy, %d hard) under %s in %.0f s", len(index), easy, len(index) - easy, cfg.out,
              time.perf_counter() - t0)  # fmt: skip
     return 0
 
 
+SCRIPT = Script(
+    name="gen_test_set",
+    doc=__doc__,
+    load=dataclass_loader(UnseenSetCfg),
+    job=_job,
+    run_dir_key="out",
+    keys=list(UnseenSetCfg.__dataclass_fields__),
+    errors=(ValueError, SceneError),
+)
+
 if __name__ == "__main__":
-    sys.exit(main(sys.argv[1:]))
+    sys.exit(run(SCRIPT, sys.argv[1:]))

@@ -8,15 +8,13 @@ every goal must be in free space and reachable through it. The folder is written
 
 from __future__ import annotations
 
-import logging
 import shutil
 import sys
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
-from omegaconf import OmegaConf
-
+from cat.cli import Script, dataclass_loader, run
 from cat.terrain import Scene, SceneError
 from cat.terrain.scene import check_scene
 
@@ -41,42 +39,31 @@ def _points(text: str, key: str) -> list[list[float]]:
     return pts
 
 
-def main(argv: list[str]) -> int:
-    logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
-    log = logging.getLogger("mesh_to_scene")
-    if any(a in ("-h", "--help") for a in argv):
-        print(__doc__)
-        return 0
-    try:
-        cfg = OmegaConf.to_object(OmegaConf.merge(OmegaConf.structured(MeshToSceneCfg), OmegaConf.from_dotlist(argv)))
-        missing = [k for k in ("mesh", "start", "goal", "out") if not getattr(cfg, k)]
-        if missing:
-            raise SceneError(f"missing {', '.join(k + '=' for k in missing)} (see --help)")
-    except SceneError as err:
-        log.error("%s", err)
-        return 2
-    except Exception as err:  # omegaconf: unknown key or bad type
-        log.error("bad arguments: %s (valid keys: %s)", err, ", ".join(MeshToSceneCfg.__dataclass_fields__))
-        return 2
+def _job(cfg: MeshToSceneCfg) -> int:
     out = Path(cfg.out)
-    try:
-        if out.exists():
-            raise SceneError(f"{out} already exists")
-        (start,) = _points(cfg.start, "start")
-        goals = _points(cfg.goal, "goal")
-        scene = Scene.from_mesh(cfg.mesh, start, goals, kind=cfg.kind)
-        if cfg.check:
-            check_scene(scene)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryDirectory(dir=out.parent) as tmp:
-            scene.save(Path(tmp) / "scene")
-            shutil.move(str(Path(tmp) / "scene"), out)
-    except SceneError as err:
-        log.error("%s", err)
-        return 2
+    if out.exists():
+        raise SceneError(f"{out} already exists")
+    (start,) = _points(cfg.start, "start")
+    goals = _points(cfg.goal, "goal")
+    scene = Scene.from_mesh(cfg.mesh, start, goals, kind=cfg.kind)
+    if cfg.check:
+        check_scene(scene)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(dir=out.parent) as tmp:
+        scene.save(Path(tmp) / "scene")
+        shutil.move(str(Path(tmp) / "scene"), out)
     print(f"scene folder: {out} ({len(goals)} goal(s))")
     return 0
 
 
+SCRIPT = Script(
+    name="mesh_to_scene",
+    doc=__doc__,
+    load=dataclass_loader(MeshToSceneCfg, required=("mesh", "start", "goal", "out")),
+    job=_job,
+    keys=list(MeshToSceneCfg.__dataclass_fields__),
+    errors=(SceneError,),
+)
+
 if __name__ == "__main__":
-    sys.exit(main(sys.argv[1:]))
+    sys.exit(run(SCRIPT, sys.argv[1:]))

@@ -1,16 +1,23 @@
-"""Plot a run's training curves from ``metrics.csv``: ``python scripts/plot_training.py <run_dir> [out.png]``."""
+"""Plot a run's training curves from ``metrics.csv``: ``python scripts/plot_training.py run=<run_dir> [out=<png>]``.
+
+Panels: mean episode return, episode length, goal-reached rate and distance error per iteration; the default
+output is ``<run_dir>/training.png``.
+"""
 
 from __future__ import annotations
 
 import csv
 import sys
 from collections import defaultdict
+from dataclasses import dataclass
 from pathlib import Path
 
 import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+
+from cat.cli import Script, dataclass_loader, run  # noqa: E402
 
 PANELS = [
     ("Train/mean_reward", "mean episode return"),
@@ -23,7 +30,7 @@ PANELS = [
 def read_metrics(run_dir: Path) -> dict[str, list[tuple[int, float]]]:
     path = run_dir / "metrics.csv"
     if not path.is_file():
-        raise FileNotFoundError(f"no metrics.csv in {run_dir}")
+        raise ValueError(f"no metrics.csv in {run_dir} (is it a run folder with at least one iteration?)")
     series: dict[str, list[tuple[int, float]]] = defaultdict(list)
     with path.open() as f:
         for row in csv.DictReader(f):
@@ -31,12 +38,15 @@ def read_metrics(run_dir: Path) -> dict[str, list[tuple[int, float]]]:
     return series
 
 
-def main(argv: list[str]) -> int:
-    if not argv:
-        print(__doc__, file=sys.stderr)
-        return 2
-    run_dir = Path(argv[0])
-    out = Path(argv[1]) if len(argv) > 1 else run_dir / "training.png"
+@dataclass
+class PlotCfg:
+    run: str = ""  # run folder (with metrics.csv)
+    out: str = ""  # PNG path; default <run>/training.png
+
+
+def plot(cfg: PlotCfg) -> int:
+    run_dir = Path(cfg.run)
+    out = Path(cfg.out) if cfg.out else run_dir / "training.png"
     series = read_metrics(run_dir)
     fps = [v for _, v in series.get("Perf/total_fps", [])]
     fig, axes = plt.subplots(2, 2, figsize=(10, 6.5))
@@ -57,5 +67,14 @@ def main(argv: list[str]) -> int:
     return 0
 
 
+SCRIPT = Script(
+    name="plot_training",
+    doc=__doc__,
+    load=dataclass_loader(PlotCfg, required=("run",)),
+    job=plot,
+    keys=["run", "out"],
+    errors=(ValueError,),
+)
+
 if __name__ == "__main__":
-    sys.exit(main(sys.argv[1:]))
+    sys.exit(run(SCRIPT, sys.argv[1:]))

@@ -24,10 +24,11 @@ def _run(script: str, *args: str, cwd: Path | None = None) -> subprocess.Complet
     )  # fmt: skip
 
 
-def _train_script():
-    """scripts/train.py as a module, to run its command line in-process (same code path, no start-up cost)."""
-    spec = importlib.util.spec_from_file_location("train_script", REPO / "scripts" / "train.py")
+def _script(name: str = "train"):
+    """scripts/<name>.py as a module, to run its command line in-process (same code path, no start-up cost)."""
+    spec = importlib.util.spec_from_file_location(f"{name}_script", REPO / "scripts" / f"{name}.py")
     mod = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = mod  # dataclasses defined in the script look their module up
     spec.loader.exec_module(mod)
     return mod
 
@@ -73,7 +74,7 @@ def test_multirun_and_hydra_dirs(tmp_path):
     ],
 )
 def test_bad_input_one_line_nothing_left(tmp_path, caplog, args, needle):
-    mod = _train_script()
+    mod = _script()
     with caplog.at_level(logging.ERROR):
         code = mod.run(mod.SCRIPT, [*args, f"run_root={tmp_path / 'runs'}"])
     errors = [r.getMessage() for r in caplog.records if r.levelno >= logging.ERROR]
@@ -87,3 +88,23 @@ def test_corrupt_checkpoint_is_one_line_from_the_real_script(tmp_path):
     res = _run("train.py", *SMALL, f"init={bad}", f"run_root={tmp_path / 'runs'}")
     _one_error_line(res, "model_3.pt: not a readable checkpoint")
     assert not (tmp_path / "runs").exists()
+
+
+@pytest.mark.parametrize(
+    "name, key",
+    [
+        ("play", "checkpoint"),
+        ("eval_table", "manifest"),
+        ("gen_scenes", "out"),
+        ("gen_test_set", "out"),
+        ("plot_training", "run"),
+        ("mesh_to_scene", "mesh"),
+    ],
+)
+def test_every_script_helps_and_suggests(tmp_path, caplog, capsys, name, key):
+    mod = _script(name)
+    assert mod.run(mod.SCRIPT, ["--help"]) == 0 and key in capsys.readouterr().out
+    with caplog.at_level(logging.ERROR):
+        assert mod.run(mod.SCRIPT, [f"{key}x=1"]) == 2
+    errors = [r.getMessage() for r in caplog.records if r.levelno >= logging.ERROR]
+    assert len(errors) == 1 and f"did you mean {key}" in errors[0], errors

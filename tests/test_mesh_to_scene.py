@@ -45,6 +45,7 @@ def test_bad_input_is_one_line_and_writes_nothing(tmp_path):
         ([f"mesh={tmp_path / 'pillar.ply'}", "start=0,0", "goal=1,0"], "goal"),  # goal inside the pillar
         ([f"mesh={tmp_path / 'pillar.ply'}", "start=0,0", "goal=two"], "expected x,y"),
         ([f"mesh={tmp_path / 'pillar.ply'}", "start=0,0"], "missing goal="),
+        ([f"mesh={tmp_path / 'pillar.ply'}", "start=0,0", "gaol=2,0"], "did you mean goal"),
     ]
     for i, (args, message) in enumerate(cases):
         out = tmp_path / f"out{i}"

@@ -37,5 +37,10 @@ SCRIPT = Script(
     errors=(CheckpointError, ValueError),
 )
 
+
+def main(argv: list[str]) -> int:
+    return run(SCRIPT, argv)
+
+
 if __name__ == "__main__":
-    sys.exit(run(SCRIPT, sys.argv[1:]))
+    sys.exit(main(sys.argv[1:]))

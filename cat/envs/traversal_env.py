@@ -339,10 +339,13 @@ class TraversalEnv(VecEnv):
         "push_timer", "field_obs_buf", "kp", "kd", "dr_scales",
     )  # fmt: skip
 
+    SNAPSHOT_FORMAT = 2  # bump when get_state's content changes
+
     def get_state(self) -> dict:
         """Everything that makes the next step of every env what it would have been: physics, episode
         bookkeeping, scene/goal assignment and the current observations (an exact training resume)."""
         snap = {name: getattr(self, name).clone() for name in self._SNAPSHOT}
+        snap["format"] = self.SNAPSHOT_FORMAT
         snap["episode_sums"] = {k: v.clone() for k, v in self.episode_sums.items()}
         snap["trial"] = self.trial.state_dict()
         snap["common_step"] = self.common_step
@@ -355,7 +358,9 @@ class TraversalEnv(VecEnv):
         return snap
 
     def set_state(self, snap: dict) -> None:
-        """Restore ``get_state``'s snapshot (same task and number of envs)."""
+        """Restore ``get_state``'s snapshot (same task and number of envs); checked before anything changes."""
+        if snap.get("format") != self.SNAPSHOT_FORMAT:
+            raise ValueError(f"env snapshot format {snap.get('format')} is not this code's {self.SNAPSHOT_FORMAT}")
         if snap["targets"].shape != self.targets.shape:
             raise ValueError(f"env snapshot of {snap['targets'].shape[0]} envs cannot restore {self.num_envs} envs")
         for name in self._SNAPSHOT:

@@ -207,7 +207,10 @@ def _restore_training_state(runner: OnPolicyRunner, env: TraversalEnv, checkpoin
     env.load_training_state(infos)
     snap = env_snapshot_path(checkpoint)
     if snap.is_file():
-        env.set_state(torch.load(snap, weights_only=False))
+        try:
+            env.set_state(torch.load(snap, weights_only=False))
+        except (ValueError, KeyError) as err:
+            log.warning("env snapshot %s not usable (%s): the resumed run starts fresh episodes", snap, err)
     else:
         log.warning("no env snapshot %s: the resumed run starts fresh episodes", snap)
     torch.set_rng_state(infos["torch_rng"])

@@ -30,6 +30,7 @@ class PlayCfg:
     seed: int = 0  # start-pose seed of the trials (not the run's RL seed)
     scene_seed: int | None = None  # typical scenes: override the run's task.scene_seed
     scene_dir: str = ""  # evaluate on these scene folders instead of the run's scenes
+    time_s: float = 5.0  # trial length (paper: 5 s); e.g. 20 to measure falls over a whole flat episode
     record: str = ""  # .rrd path: record world 0 of the rollout for rerun replay (`rerun <file>`)
 
 
@@ -41,7 +42,9 @@ def play(cfg: PlayCfg) -> Summary:
     if cfg.episodes < 1:
         raise ValueError(f"episodes must be >= 1, got {cfg.episodes}")
     group = run_scene_group(task, cfg.scene_seed, cfg.scene_dir)
-    opts = EvalCfg(seed=cfg.seed)
+    if cfg.time_s <= 0:
+        raise ValueError(f"time_s must be > 0, got {cfg.time_s}")
+    opts = EvalCfg(seed=cfg.seed, success=replace(EvalCfg().success, time_s=cfg.time_s))
     yaw = opts.start_yaw_range
     if group is None:
         trials = first_trials(lambda k: flat_trials(k, cfg.seed, yaw, radius=2.0), cfg.episodes, 8)

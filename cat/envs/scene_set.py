@@ -1,5 +1,8 @@
 """A set of obstacle scenes for the env: tiled into one MuJoCo model, with a HumanoidPF bank per (scene, goal).
 
+Scenes may differ in grid shape (typical, procedural and indoor in one set): the bank stores d and ∇d once
+per scene and F once per goal.
+
 All scenes live in every world, side by side on a grid of tiles (``tile_spacing`` apart); env ``i`` trains in
 scene ``i % num_scenes``, so one compiled model serves both backends and obstacles of other tiles are never
 reached. Fields come from the scene folders (``fields/goal_XX.npz``, written by ``scripts/gen_scenes.py``) or
@@ -10,7 +13,7 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import replace
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import mujoco
@@ -19,7 +22,7 @@ import torch
 from tqdm import tqdm
 
 from cat.envs.field_source import FieldSample
-from cat.fields import Field, FieldBank, FieldCfg, Grid, build_fields
+from cat.fields import Field, FieldBank, FieldCfg, Grid, SceneFields, SceneLayout, build_fields
 from cat.terrain import Scene, typical_variants
 from cat.terrain.mujoco_export import add_obstacles_to_spec, convex_parts
 
@@ -53,16 +56,16 @@ class SceneSet:
     def __init__(
         self,
         scenes: list[Scene],
-        fields: list[list[Field]],
+        fields: Sequence[SceneFields | list[Field]] | Callable[[int], SceneFields | list[Field]],
         num_envs: int,
         device: str = "cpu",
         tile_margin: float = 2.0,
+        dtype: str = "float32",
     ):
+        """``fields[s]`` (or ``fields(s)``, called once per scene while the bank fills) are scene ``s``'s goal
+        fields on its own grid; scenes may have different grid shapes. ``dtype`` is the bank storage."""
         if not scenes:
             raise SceneSetError("no scenes given")
-        shapes = {f.grid.shape for per_scene in fields for f in per_scene}
-        if len(shapes) != 1:
-            raise SceneSetError(f"scenes of one set need fields of one grid shape, got {sorted(shapes)}")
         self.scenes, self.num_envs, self.device = scenes, num_envs, torch.device(device)
         extent = max(float(np.max(s.bounds[1, :2] - s.bounds[0, :2])) for s in scenes)
         self.tile_spacing = extent + tile_margin
@@ -71,17 +74,22 @@ class SceneSet:
         self.offsets = np.array(
             [[(i % cols) * self.tile_spacing, (i // cols) * self.tile_spacing, 0.0] for i in range(len(scenes))]
         )
-        shifted = []
-        self.field_start = []
-        for s, off, per_scene in zip(scenes, self.offsets, fields, strict=True):
-            if len(per_scene) != len(s.goals):
-                raise SceneSetError(f"scene {s.kind!r} has {len(s.goals)} goals but {len(per_scene)} fields")
-            self.field_start.append(len(shifted))
-            for f in per_scene:
-                g = f.grid
-                origin = tuple(float(o + d) for o, d in zip(g.origin, off, strict=True))
-                shifted.append(replace(f, grid=Grid(origin, g.voxel, g.shape), goal=f.goal + off))
-        self.bank = FieldBank.from_fields(shifted, device=self.device)
+        layouts = []
+        for s in scenes:
+            g = s.grid()
+            layouts.append(SceneLayout(Grid(g.origin, g.voxel, g.shape), len(s.goals)))
+        load = fields if callable(fields) else fields.__getitem__
+        if not callable(fields) and len(fields) != len(scenes):
+            raise SceneSetError(f"{len(scenes)} scenes but {len(fields)} field sets")
+
+        def checked(i: int) -> SceneFields | list[Field]:
+            f = load(i)
+            n = f.num_goals if isinstance(f, SceneFields) else len(f)
+            if n != len(scenes[i].goals):
+                raise SceneSetError(f"scene {i} ({scenes[i].kind!r}) has {len(scenes[i].goals)} goals but {n} fields")
+            return f
+
+        self.bank = FieldBank.build(layouts, checked, self.offsets, dtype=dtype, device=self.device)
         self.scene_of_env = torch.arange(num_envs) % len(scenes)
         self._goal_idx = torch.zeros(num_envs, dtype=torch.long)
 
@@ -94,8 +102,10 @@ class SceneSet:
         device: str = "cpu",
         kind: str | None = None,
         field_cfg: FieldCfg | None = None,
+        dtype: str = "float32",
     ) -> SceneSet:
-        """Every scene folder (with ``scene.json``) under ``path``, optionally only those of ``kind``."""
+        """Every scene folder (with ``scene.json``) under ``path``, optionally only those of ``kind``; grid
+        shapes may differ. Fields are read (or built) one scene at a time while the bank fills."""
         root = Path(path)
         if not root.is_dir():
             raise SceneSetError(f"scene folder not found: {root}")
@@ -106,9 +116,16 @@ class SceneSet:
             kinds = sorted({s.kind for s in scenes})
             raise SceneSetError(f"no scenes{' of kind ' + repr(kind) if kind else ''} under {root}; found: {kinds}")
         scenes, folders = [scenes[i] for i in keep], [folders[i] for i in keep]
-        pairs = list(zip(scenes, folders, strict=True))
-        fields = [scene_fields(s, f, field_cfg) for s, f in tqdm(pairs, desc="fields")]
-        return cls(scenes, fields, num_envs, device)
+        bar = tqdm(total=len(scenes), desc="fields")
+
+        def load(i: int) -> SceneFields | list[Field]:
+            bar.update()
+            return scene_fields(scenes[i], folders[i], field_cfg)
+
+        try:
+            return cls(scenes, load, num_envs, device, dtype=dtype)
+        finally:
+            bar.close()
 
     @classmethod
     def typical(
@@ -179,7 +196,7 @@ class SceneSet:
 
     def field_ids(self, env_ids: torch.Tensor) -> torch.Tensor:
         ids = env_ids.cpu()
-        starts = torch.tensor(self.field_start)[self.scene_of_env[ids]]
+        starts = torch.as_tensor(self.bank.field_start[:-1])[self.scene_of_env[ids]]
         return starts + self._goal_idx[ids]
 
     def mesh_for_env(self, env_id: int):

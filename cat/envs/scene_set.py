@@ -5,7 +5,7 @@ per scene and F once per goal.
 
 All scenes live in every world, side by side on a grid of tiles (``tile_spacing`` apart); env ``i`` trains in
 scene ``i % num_scenes``, so one compiled model serves both backends and obstacles of other tiles are never
-reached. Fields come from the scene folders (``fields/goal_XX.npz``, written by ``scripts/gen_scenes.py``) or
+reached. Fields come from the scene folders (``fields/humanoid_pf.npz``, written by ``scripts/gen_scenes.py``) or
 are built on load; their grid origins are shifted by the tile offset into the shared world frame.
 """
 
@@ -22,7 +22,8 @@ import torch
 from tqdm import tqdm
 
 from cat.envs.field_source import FieldSample
-from cat.fields import Field, FieldBank, FieldCfg, Grid, SceneFields, SceneLayout, build_fields
+from cat.fields import Field, FieldBank, FieldCfg, Grid, SceneFields, SceneLayout, StaleFieldError, build_fields
+from cat.fields.store import STORE_FILE
 from cat.terrain import Scene, typical_variants
 from cat.terrain.mujoco_export import add_obstacles_to_spec, convex_parts
 
@@ -103,9 +104,14 @@ class SceneSet:
         kind: str | None = None,
         field_cfg: FieldCfg | None = None,
         dtype: str = "float32",
+        on_stale: str = "rebuild",
     ) -> SceneSet:
         """Every scene folder (with ``scene.json``) under ``path``, optionally only those of ``kind``; grid
-        shapes may differ. Fields are read (or built) one scene at a time while the bank fills."""
+        shapes may differ. Fields are read (or built) one scene at a time while the bank fills; saved fields
+        that do not match ``field_cfg`` (or the scene) are rebuilt (``on_stale="rebuild"``) or refused
+        (``"error"``: raises :class:`cat.fields.StaleFieldError`)."""
+        if on_stale not in ("rebuild", "error"):
+            raise SceneSetError(f"on_stale must be 'rebuild' or 'error', got {on_stale!r}")
         root = Path(path)
         if not root.is_dir():
             raise SceneSetError(f"scene folder not found: {root}")
@@ -120,7 +126,7 @@ class SceneSet:
 
         def load(i: int) -> SceneFields | list[Field]:
             bar.update()
-            return scene_fields(scenes[i], folders[i], field_cfg)
+            return scene_fields(scenes[i], folders[i], field_cfg, on_stale)
 
         try:
             return cls(scenes, load, num_envs, device, dtype=dtype)
@@ -139,8 +145,7 @@ class SceneSet:
     ) -> SceneSet:
         """The paper's typical scenes of ``kind`` built on the fly (no dataset needed)."""
         scenes = typical_variants(kind, variants, seed)
-        fields = [scene_fields(s, None, field_cfg) for s in tqdm(scenes, desc=f"{kind} fields")]
-        return cls(scenes, fields, num_envs, device)
+        return cls(scenes, lambda i: scene_fields(scenes[i], None, field_cfg), num_envs, device)
 
     # --- env hooks ----------------------------------------------------------------------------------------
     def add_to_spec(self, spec: mujoco.MjSpec) -> None:
@@ -204,12 +209,36 @@ class SceneSet:
         return self.scenes[s_idx].mesh.copy().apply_translation(self.offsets[s_idx])
 
 
-def scene_fields(scene: Scene, folder: Path | None, cfg: FieldCfg | None) -> list[Field]:
-    """Precomputed fields of a scene folder when complete, else built from its occupancy now."""
-    if folder is not None:
-        files = [Scene.fields_dir(folder) / f"goal_{i:02d}.npz" for i in range(len(scene.goals))]
-        if all(f.is_file() for f in files):
-            return [Field.load(f) for f in files]
-        log.info("%s: building %d goal fields (not precomputed)", folder, len(scene.goals))
+def scene_fields(
+    scene: Scene, folder: Path | None, cfg: FieldCfg | None, on_stale: str = "rebuild"
+) -> SceneFields | list[Field]:
+    """Precomputed fields of a scene folder when present and current, else built from its occupancy now.
+
+    Saved fields built under other build constants of ``cfg``, on another grid or for other goals are
+    stale: rebuilt here with a warning (``on_stale="rebuild"``) or refused (``"error"``)."""
+    cfg = cfg or FieldCfg()
     g = scene.grid()
-    return build_fields(scene.occupancy(), Grid(g.origin, g.voxel, g.shape), scene.goals, cfg)
+    grid = Grid(g.origin, g.voxel, g.shape)
+    if folder is not None:
+        fdir = Scene.fields_dir(folder)
+        try:
+            if (fdir / STORE_FILE).is_file():
+                return SceneFields.load(fdir / STORE_FILE, cfg, grid, scene.goals)
+            files = [fdir / f"goal_{i:02d}.npz" for i in range(len(scene.goals))]  # the older per-goal layout
+            if all(f.is_file() for f in files):
+                return _legacy_fields(files, cfg, grid, scene.goals)
+        except StaleFieldError as err:
+            if on_stale == "error":
+                raise
+            log.warning("%s; rebuilding in memory (re-run scripts/gen_scenes.py to refresh the folder)", err)
+        else:
+            log.info("%s: building %d goal fields (not precomputed)", folder, len(scene.goals))
+    return build_fields(scene.occupancy(), grid, scene.goals, cfg)
+
+
+def _legacy_fields(files: list[Path], cfg: FieldCfg, grid: Grid, goals: np.ndarray) -> list[Field]:
+    fields = [Field.load(f, cfg) for f in files]
+    for f, path, goal in zip(fields, files, goals, strict=True):
+        if f.grid.shape != grid.shape or not np.allclose(f.goal, goal, atol=1e-6):
+            raise StaleFieldError(f"{path}: built for another grid or goal")
+    return fields

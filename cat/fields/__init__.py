@@ -6,7 +6,7 @@
 """
 
 from cat.fields.bank import QUERY_CHANNELS, FieldBank, FieldSample, SceneLayout, bank_bytes
-from cat.fields.config import FieldCfg
+from cat.fields.config import FieldCfg, StaleFieldError
 from cat.fields.field import CHANNELS, Field, build_field, build_fields
 from cat.fields.geodesic import geodesic_distance
 from cat.fields.grid import Grid
@@ -23,6 +23,7 @@ __all__ = [
     "QUERY_CHANNELS",
     "SceneFields",
     "SceneLayout",
+    "StaleFieldError",
     "bank_bytes",
     "Grid",
     "build_field",

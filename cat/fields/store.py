@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cat.fields.config import FieldCfg
+from cat.fields.config import FieldCfg, StaleFieldError, cfg_from_dict, check_built_with
 from cat.fields.field import Field
 from cat.fields.grid import Grid
 
@@ -87,12 +87,41 @@ class SceneFields:
         return path
 
     @classmethod
-    def load(cls, path: str | os.PathLike) -> SceneFields:
-        """Read a file written by :meth:`save` (arrays keep their storage dtype)."""
+    def load(
+        cls, path: str | os.PathLike, cfg: FieldCfg | None = None, grid: Grid | None = None, goals=None
+    ) -> SceneFields:
+        """Read a file written by :meth:`save` (arrays keep their storage dtype).
+
+        Given ``cfg``, ``grid`` or ``goals``, a file built under other build constants, on another grid or for
+        other goals raises :class:`StaleFieldError` before the arrays are read; another format version too."""
         with np.load(path, allow_pickle=False) as z:
-            version = int(z["store_version"]) if "store_version" in z else -1
-            if version != STORE_VERSION:
-                raise ValueError(f"{path}: scene-fields format version {version}, expected {STORE_VERSION}")
-            grid = Grid(tuple(z["origin"]), float(z["voxel"]), tuple(int(v) for v in z["shape"]))
-            cfg = FieldCfg(**json.loads(str(z["cfg"])))
-            return cls(grid, z["goals"], z["sdf_grad"], z["force"], cfg)
+            saved_grid, saved_goals, saved_cfg = _check(z, path, cfg, grid, goals)
+            return cls(saved_grid, saved_goals, z["sdf_grad"], z["force"], saved_cfg)
+
+    @staticmethod
+    def check(path: str | os.PathLike, cfg: FieldCfg | None = None, grid: Grid | None = None, goals=None) -> None:
+        """The checks of :meth:`load` without reading the arrays (raises :class:`StaleFieldError`)."""
+        with np.load(path, allow_pickle=False) as z:
+            _check(z, path, cfg, grid, goals)
+
+
+def _check(z, path, cfg: FieldCfg | None, grid: Grid | None, goals) -> tuple[Grid, np.ndarray, FieldCfg]:
+    version = int(z["store_version"]) if "store_version" in z else -1
+    if version != STORE_VERSION:
+        raise StaleFieldError(f"{path}: scene-fields format version {version}, expected {STORE_VERSION}")
+    saved = json.loads(str(z["cfg"]))
+    if cfg is not None:
+        check_built_with(saved, cfg, str(path))
+    saved_grid = Grid(tuple(z["origin"]), float(z["voxel"]), tuple(int(v) for v in z["shape"]))
+    if grid is not None and not _same_grid(saved_grid, grid):
+        raise StaleFieldError(f"{path}: built on grid {saved_grid}, expected {grid}")
+    saved_goals = z["goals"]
+    if goals is not None:
+        want = np.asarray(goals, dtype=np.float64).reshape(-1, 3)
+        if saved_goals.shape != want.shape or not np.allclose(saved_goals, want, atol=1e-6):
+            raise StaleFieldError(f"{path}: built for other goals ({len(saved_goals)} saved, {len(want)} asked)")
+    return saved_grid, saved_goals, cfg_from_dict(saved)
+
+
+def _same_grid(a: Grid, b: Grid) -> bool:
+    return a.shape == b.shape and np.isclose(a.voxel, b.voxel) and np.allclose(a.origin, b.origin, atol=1e-6)

@@ -1,4 +1,4 @@
-"""Benchmarks: ``python scripts/bench.py sim|fields|train|eval`` (extra args pass through to the case)."""
+"""Benchmarks: ``python scripts/bench.py sim|fields|train|eval|gen`` (extra args go to the case)."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ COMMANDS = {
     "fields": "cat.fields.bench",
     "train": "cat.learning.bench",
     "eval": "cat.eval.bench",
+    "gen": "cat.terrain.bench",
 }
 
 

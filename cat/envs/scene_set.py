@@ -25,7 +25,7 @@ from cat.envs.field_source import FieldSample
 from cat.fields import Field, FieldBank, FieldCfg, Grid, SceneFields, SceneLayout, StaleFieldError, build_fields
 from cat.fields.store import STORE_FILE
 from cat.terrain import Scene, typical_variants
-from cat.terrain.mujoco_export import add_obstacles_to_spec, convex_parts
+from cat.terrain.mujoco_export import add_obstacles_to_spec
 
 log = logging.getLogger(__name__)
 
@@ -149,10 +149,10 @@ class SceneSet:
 
     # --- env hooks ----------------------------------------------------------------------------------------
     def add_to_spec(self, spec: mujoco.MjSpec) -> None:
-        """Add every scene's convex parts, shifted to its tile, under the ``obstacles`` body."""
+        """Add every scene's obstacles (convex parts, or voxel height fields and boxes), shifted to its tile,
+        under the ``obstacles`` body."""
         for scene, off in zip(self.scenes, self.offsets, strict=True):
-            parts = [p.copy().apply_translation(off) for p in convex_parts(scene.mesh)]
-            add_obstacles_to_spec(spec, parts)
+            add_obstacles_to_spec(spec, scene, offset=off)
 
     @property
     def difficulties(self) -> torch.Tensor:

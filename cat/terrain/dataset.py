@@ -184,9 +184,10 @@ def build_one(job: Job, cfg: GenScenesCfg) -> dict:
         build_fields(scene, folder, cfg.field_source, cfg.max_field_goals, cfg.field_dtype) if cfg.fields else True
     )
     if cfg.convex_parts:
-        from cat.terrain.mujoco_export import convex_parts
+        from cat.terrain.mujoco_export import convex_parts, uses_voxels
 
-        convex_parts(scene.mesh)
+        if not uses_voxels(scene):  # voxel scenes need no decomposition (height fields + boxes on load)
+            convex_parts(scene.mesh)
     if cfg.render:
         from cat.terrain.render import render_scene
 

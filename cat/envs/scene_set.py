@@ -48,7 +48,15 @@ class BankField:
         """Fields at ``points`` (n, K, 3) of all envs, or of ``env_ids`` (goals are baked into the bank)."""
         idx = self.field_idx if env_ids is None else self.field_idx[env_ids.to(self.field_idx.device)]
         s = self.bank.query(idx, points)
-        return FieldSample(force=s.force, sdf=s.sdf, grad_sdf=s.grad_sdf)
+        return FieldSample(force=s.force, sdf=s.sdf, grad_sdf=s.grad_sdf, outside=self.outside(idx, points))
+
+    def outside(self, field_idx: torch.Tensor, points: torch.Tensor) -> torch.Tensor:
+        """(n,) largest distance (m) of an env's ``points`` outside its field's grid, sideways or above."""
+        lo, hi = self.bank.field_bounds(field_idx)
+        p = points.to(lo)
+        gap = torch.maximum(lo[:, None] - p, p - hi[:, None]).clamp_min(0.0)
+        gap[..., 2] = (p[..., 2] - hi[:, None, 2]).clamp_min(0.0)  # below the grid is the floor
+        return gap.norm(dim=-1).amax(dim=-1)
 
 
 class SceneSet:

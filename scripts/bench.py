@@ -1,4 +1,4 @@
-"""Benchmarks: ``python scripts/bench.py sim|fields|train|eval|gen`` (extra args go to the case)."""
+"""Benchmarks: ``python scripts/bench.py sim|fields|train|eval|gen|scale`` (extra args go to the case)."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ COMMANDS = {
     "train": "cat.learning.bench",
     "eval": "cat.eval.bench",
     "gen": "cat.terrain.bench",
+    "scale": "cat.envs.bench_scale",
 }
 
 

@@ -1,4 +1,4 @@
-"""Benchmarks: ``python scripts/bench.py sim|fields|train|eval|gen|scale`` (extra args go to the case)."""
+"""Benchmarks: ``python scripts/bench.py sim|fields|train|eval|gen|scale|soak`` (extra args go to the case)."""
 
 from __future__ import annotations
 
@@ -12,6 +12,7 @@ COMMANDS = {
     "eval": "cat.eval.bench",
     "gen": "cat.terrain.bench",
     "scale": "cat.envs.bench_scale",
+    "soak": "cat.envs.bench_soak",
 }
 
 

@@ -1,4 +1,4 @@
-"""Benchmarks: ``python scripts/bench.py sim|fields|train|eval`` (extra args pass through to the case)."""
+"""Benchmarks: ``python scripts/bench.py sim|fields|train|eval|gen|scale|soak`` (extra args go to the case)."""
 
 from __future__ import annotations
 
@@ -10,6 +10,9 @@ COMMANDS = {
     "fields": "cat.fields.bench",
     "train": "cat.learning.bench",
     "eval": "cat.eval.bench",
+    "gen": "cat.terrain.bench",
+    "scale": "cat.envs.bench_scale",
+    "soak": "cat.envs.bench_soak",
 }
 
 

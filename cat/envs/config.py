@@ -123,10 +123,11 @@ class RewardCfg:
 
 @dataclass
 class TerminationCfg:
-    terms: list[str] = field(default_factory=lambda: ["fallen", "collided", "non_finite"])
+    terms: list[str] = field(default_factory=lambda: ["fallen", "collided", "non_finite", "left_field_grid"])
     min_base_height: float = 0.35  # [m]
     max_tilt: float = 1.0  # [rad] angle between the pelvis z axis and the vertical
     on_collision: bool = False  # end the episode on any robot-obstacle contact
+    field_grid_margin: float = 0.15  # [m] a query link this far outside its scene's field grid ends the episode
 
 
 @dataclass

@@ -14,11 +14,14 @@ import torch
 
 @dataclass
 class FieldSample:
-    """Field values at query points: F = -grad U (N, K, 3), SDF d (N, K) and its gradient (N, K, 3)."""
+    """Field values at query points: F = -grad U (N, K, 3), SDF d (N, K) and its gradient (N, K, 3), and how
+    far (m) the farthest of an env's points lies outside its field's grid (N,): sideways or above it; below
+    the grid is the floor and does not count. Reads outside are clamped to the grid's border values."""
 
     force: torch.Tensor
     sdf: torch.Tensor
     grad_sdf: torch.Tensor
+    outside: torch.Tensor
 
 
 class GoalField:
@@ -33,4 +36,5 @@ class GoalField:
         delta = goals[:, None, :] - points
         force = self.eta * delta / delta.norm(dim=-1, keepdim=True).clamp_min(1e-6)
         sdf = torch.full(points.shape[:-1], self.free_sdf, dtype=points.dtype, device=points.device)
-        return FieldSample(force=force, sdf=sdf, grad_sdf=torch.zeros_like(points))
+        outside = torch.zeros(points.shape[0], dtype=points.dtype, device=points.device)  # unbounded field
+        return FieldSample(force=force, sdf=sdf, grad_sdf=torch.zeros_like(points), outside=outside)

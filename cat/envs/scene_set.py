@@ -1,8 +1,11 @@
 """A set of obstacle scenes for the env: tiled into one MuJoCo model, with a HumanoidPF bank per (scene, goal).
 
+Scenes may differ in grid shape (typical, procedural and indoor in one set): the bank stores d and ∇d once
+per scene and F once per goal.
+
 All scenes live in every world, side by side on a grid of tiles (``tile_spacing`` apart); env ``i`` trains in
 scene ``i % num_scenes``, so one compiled model serves both backends and obstacles of other tiles are never
-reached. Fields come from the scene folders (``fields/goal_XX.npz``, written by ``scripts/gen_scenes.py``) or
+reached. Fields come from the scene folders (``fields/humanoid_pf.npz``, written by ``scripts/gen_scenes.py``) or
 are built on load; their grid origins are shifted by the tile offset into the shared world frame.
 """
 
@@ -10,7 +13,7 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import replace
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import mujoco
@@ -19,9 +22,10 @@ import torch
 from tqdm import tqdm
 
 from cat.envs.field_source import FieldSample
-from cat.fields import Field, FieldBank, FieldCfg, Grid, build_fields
+from cat.fields import Field, FieldBank, FieldCfg, Grid, SceneFields, SceneLayout, StaleFieldError, build_fields
+from cat.fields.store import STORE_FILE
 from cat.terrain import Scene, typical_variants
-from cat.terrain.mujoco_export import add_obstacles_to_spec, convex_parts
+from cat.terrain.mujoco_export import add_obstacles_to_spec
 
 log = logging.getLogger(__name__)
 
@@ -44,7 +48,15 @@ class BankField:
         """Fields at ``points`` (n, K, 3) of all envs, or of ``env_ids`` (goals are baked into the bank)."""
         idx = self.field_idx if env_ids is None else self.field_idx[env_ids.to(self.field_idx.device)]
         s = self.bank.query(idx, points)
-        return FieldSample(force=s.force, sdf=s.sdf, grad_sdf=s.grad_sdf)
+        return FieldSample(force=s.force, sdf=s.sdf, grad_sdf=s.grad_sdf, outside=self.outside(idx, points))
+
+    def outside(self, field_idx: torch.Tensor, points: torch.Tensor) -> torch.Tensor:
+        """(n,) largest distance (m) of an env's ``points`` outside its field's grid, sideways or above."""
+        lo, hi = self.bank.field_bounds(field_idx)
+        p = points.to(lo)
+        gap = torch.maximum(lo[:, None] - p, p - hi[:, None]).clamp_min(0.0)
+        gap[..., 2] = (p[..., 2] - hi[:, None, 2]).clamp_min(0.0)  # below the grid is the floor
+        return gap.norm(dim=-1).amax(dim=-1)
 
 
 class SceneSet:
@@ -53,16 +65,16 @@ class SceneSet:
     def __init__(
         self,
         scenes: list[Scene],
-        fields: list[list[Field]],
+        fields: Sequence[SceneFields | list[Field]] | Callable[[int], SceneFields | list[Field]],
         num_envs: int,
         device: str = "cpu",
         tile_margin: float = 2.0,
+        dtype: str = "float32",
     ):
+        """``fields[s]`` (or ``fields(s)``, called once per scene while the bank fills) are scene ``s``'s goal
+        fields on its own grid; scenes may have different grid shapes. ``dtype`` is the bank storage."""
         if not scenes:
             raise SceneSetError("no scenes given")
-        shapes = {f.grid.shape for per_scene in fields for f in per_scene}
-        if len(shapes) != 1:
-            raise SceneSetError(f"scenes of one set need fields of one grid shape, got {sorted(shapes)}")
         self.scenes, self.num_envs, self.device = scenes, num_envs, torch.device(device)
         extent = max(float(np.max(s.bounds[1, :2] - s.bounds[0, :2])) for s in scenes)
         self.tile_spacing = extent + tile_margin
@@ -71,17 +83,22 @@ class SceneSet:
         self.offsets = np.array(
             [[(i % cols) * self.tile_spacing, (i // cols) * self.tile_spacing, 0.0] for i in range(len(scenes))]
         )
-        shifted = []
-        self.field_start = []
-        for s, off, per_scene in zip(scenes, self.offsets, fields, strict=True):
-            if len(per_scene) != len(s.goals):
-                raise SceneSetError(f"scene {s.kind!r} has {len(s.goals)} goals but {len(per_scene)} fields")
-            self.field_start.append(len(shifted))
-            for f in per_scene:
-                g = f.grid
-                origin = tuple(float(o + d) for o, d in zip(g.origin, off, strict=True))
-                shifted.append(replace(f, grid=Grid(origin, g.voxel, g.shape), goal=f.goal + off))
-        self.bank = FieldBank.from_fields(shifted, device=self.device)
+        layouts = []
+        for s in scenes:
+            g = s.grid()
+            layouts.append(SceneLayout(Grid(g.origin, g.voxel, g.shape), len(s.goals)))
+        load = fields if callable(fields) else fields.__getitem__
+        if not callable(fields) and len(fields) != len(scenes):
+            raise SceneSetError(f"{len(scenes)} scenes but {len(fields)} field sets")
+
+        def checked(i: int) -> SceneFields | list[Field]:
+            f = load(i)
+            n = f.num_goals if isinstance(f, SceneFields) else len(f)
+            if n != len(scenes[i].goals):
+                raise SceneSetError(f"scene {i} ({scenes[i].kind!r}) has {len(scenes[i].goals)} goals but {n} fields")
+            return f
+
+        self.bank = FieldBank.build(layouts, checked, self.offsets, dtype=dtype, device=self.device)
         self.scene_of_env = torch.arange(num_envs) % len(scenes)
         self._goal_idx = torch.zeros(num_envs, dtype=torch.long)
 
@@ -94,8 +111,15 @@ class SceneSet:
         device: str = "cpu",
         kind: str | None = None,
         field_cfg: FieldCfg | None = None,
+        dtype: str = "float32",
+        on_stale: str = "rebuild",
     ) -> SceneSet:
-        """Every scene folder (with ``scene.json``) under ``path``, optionally only those of ``kind``."""
+        """Every scene folder (with ``scene.json``) under ``path``, optionally only those of ``kind``; grid
+        shapes may differ. Fields are read (or built) one scene at a time while the bank fills; saved fields
+        that do not match ``field_cfg`` (or the scene) are rebuilt (``on_stale="rebuild"``) or refused
+        (``"error"``: raises :class:`cat.fields.StaleFieldError`)."""
+        if on_stale not in ("rebuild", "error"):
+            raise SceneSetError(f"on_stale must be 'rebuild' or 'error', got {on_stale!r}")
         root = Path(path)
         if not root.is_dir():
             raise SceneSetError(f"scene folder not found: {root}")
@@ -106,9 +130,16 @@ class SceneSet:
             kinds = sorted({s.kind for s in scenes})
             raise SceneSetError(f"no scenes{' of kind ' + repr(kind) if kind else ''} under {root}; found: {kinds}")
         scenes, folders = [scenes[i] for i in keep], [folders[i] for i in keep]
-        pairs = list(zip(scenes, folders, strict=True))
-        fields = [scene_fields(s, f, field_cfg) for s, f in tqdm(pairs, desc="fields")]
-        return cls(scenes, fields, num_envs, device)
+        bar = tqdm(total=len(scenes), desc="fields")
+
+        def load(i: int) -> SceneFields | list[Field]:
+            bar.update()
+            return scene_fields(scenes[i], folders[i], field_cfg, on_stale)
+
+        try:
+            return cls(scenes, load, num_envs, device, dtype=dtype)
+        finally:
+            bar.close()
 
     @classmethod
     def typical(
@@ -122,15 +153,14 @@ class SceneSet:
     ) -> SceneSet:
         """The paper's typical scenes of ``kind`` built on the fly (no dataset needed)."""
         scenes = typical_variants(kind, variants, seed)
-        fields = [scene_fields(s, None, field_cfg) for s in tqdm(scenes, desc=f"{kind} fields")]
-        return cls(scenes, fields, num_envs, device)
+        return cls(scenes, lambda i: scene_fields(scenes[i], None, field_cfg), num_envs, device)
 
     # --- env hooks ----------------------------------------------------------------------------------------
     def add_to_spec(self, spec: mujoco.MjSpec) -> None:
-        """Add every scene's convex parts, shifted to its tile, under the ``obstacles`` body."""
+        """Add every scene's obstacles (convex parts, or voxel height fields and boxes), shifted to its tile,
+        under the ``obstacles`` body."""
         for scene, off in zip(self.scenes, self.offsets, strict=True):
-            parts = [p.copy().apply_translation(off) for p in convex_parts(scene.mesh)]
-            add_obstacles_to_spec(spec, parts)
+            add_obstacles_to_spec(spec, scene, offset=off)
 
     @property
     def difficulties(self) -> torch.Tensor:
@@ -179,7 +209,7 @@ class SceneSet:
 
     def field_ids(self, env_ids: torch.Tensor) -> torch.Tensor:
         ids = env_ids.cpu()
-        starts = torch.tensor(self.field_start)[self.scene_of_env[ids]]
+        starts = torch.as_tensor(self.bank.field_start[:-1])[self.scene_of_env[ids]]
         return starts + self._goal_idx[ids]
 
     def mesh_for_env(self, env_id: int):
@@ -187,12 +217,36 @@ class SceneSet:
         return self.scenes[s_idx].mesh.copy().apply_translation(self.offsets[s_idx])
 
 
-def scene_fields(scene: Scene, folder: Path | None, cfg: FieldCfg | None) -> list[Field]:
-    """Precomputed fields of a scene folder when complete, else built from its occupancy now."""
-    if folder is not None:
-        files = [Scene.fields_dir(folder) / f"goal_{i:02d}.npz" for i in range(len(scene.goals))]
-        if all(f.is_file() for f in files):
-            return [Field.load(f) for f in files]
-        log.info("%s: building %d goal fields (not precomputed)", folder, len(scene.goals))
+def scene_fields(
+    scene: Scene, folder: Path | None, cfg: FieldCfg | None, on_stale: str = "rebuild"
+) -> SceneFields | list[Field]:
+    """Precomputed fields of a scene folder when present and current, else built from its occupancy now.
+
+    Saved fields built under other build constants of ``cfg``, on another grid or for other goals are
+    stale: rebuilt here with a warning (``on_stale="rebuild"``) or refused (``"error"``)."""
+    cfg = cfg or FieldCfg()
     g = scene.grid()
-    return build_fields(scene.occupancy(), Grid(g.origin, g.voxel, g.shape), scene.goals, cfg)
+    grid = Grid(g.origin, g.voxel, g.shape)
+    if folder is not None:
+        fdir = Scene.fields_dir(folder)
+        try:
+            if (fdir / STORE_FILE).is_file():
+                return SceneFields.load(fdir / STORE_FILE, cfg, grid, scene.goals)
+            files = [fdir / f"goal_{i:02d}.npz" for i in range(len(scene.goals))]  # the older per-goal layout
+            if all(f.is_file() for f in files):
+                return _legacy_fields(files, cfg, grid, scene.goals)
+        except StaleFieldError as err:
+            if on_stale == "error":
+                raise
+            log.warning("%s; rebuilding in memory (re-run scripts/gen_scenes.py to refresh the folder)", err)
+        else:
+            log.info("%s: building %d goal fields (not precomputed)", folder, len(scene.goals))
+    return build_fields(scene.occupancy(), grid, scene.goals, cfg)
+
+
+def _legacy_fields(files: list[Path], cfg: FieldCfg, grid: Grid, goals: np.ndarray) -> list[Field]:
+    fields = [Field.load(f, cfg) for f in files]
+    for f, path, goal in zip(fields, files, goals, strict=True):
+        if f.grid.shape != grid.shape or not np.allclose(f.goal, goal, atol=1e-6):
+            raise StaleFieldError(f"{path}: built for another grid or goal")
+    return fields

@@ -5,13 +5,14 @@
 >>> f.sdf, f.geodesic, f.force  # numpy (nx, ny, nz[, 3])
 """
 
-from cat.fields.bank import FieldBank, FieldSample
-from cat.fields.config import FieldCfg
+from cat.fields.bank import QUERY_CHANNELS, FieldBank, FieldSample, SceneLayout, bank_bytes
+from cat.fields.config import FieldCfg, StaleFieldError
 from cat.fields.field import CHANNELS, Field, build_field, build_fields
 from cat.fields.geodesic import geodesic_distance
 from cat.fields.grid import Grid
 from cat.fields.humanoid_pf import field_reward, humanoid_pf, log_c3, priority_weights, vmf_log_likelihood
 from cat.fields.sdf import mesh_sdf_at, occupancy_from_points, sdf_from_mesh, sdf_from_occupancy, sdf_from_points
+from cat.fields.store import SceneFields
 
 __all__ = [
     "CHANNELS",
@@ -19,6 +20,11 @@ __all__ = [
     "FieldBank",
     "FieldCfg",
     "FieldSample",
+    "QUERY_CHANNELS",
+    "SceneFields",
+    "SceneLayout",
+    "StaleFieldError",
+    "bank_bytes",
     "Grid",
     "build_field",
     "build_fields",

@@ -1,91 +1,51 @@
-# ruff: noqa: UP018  (Warp kernels need int(0)/float(0.0) to declare mutable locals)
-"""Field bank: many fields (scenes × goals) in one tensor, and the batched 13-link trilinear query.
+"""Field bank: HumanoidPF of many scenes × goals on one device, and the batched 13-link trilinear query.
 
-All fields of a bank share ``shape`` and ``voxel``; each has its own origin (and goal). Env ``e`` reads
-field ``field_idx[e]`` at its K link positions in one Warp kernel launch (one thread per env), on
-the device of the bank tensor; inputs and outputs are torch tensors aliased with ``wp.from_torch``.
+Scenes may have different grid shapes (typical 75×50×38, procedural 125×125×40, indoor 125×125×50) and
+origins. What the env reads is stored once where it can be: d and ∇d per *scene* (``SCENE_CHANNELS``), F
+per *field* = (scene, goal) (``GOAL_CHANNELS``); the geodesic and U are not stored (nothing reads them).
+Storage is float32 or float16 (half the memory; the accuracy loss is measured in docs/fields.md), two flat
+buffers addressed with 64-bit offsets (see :mod:`cat.fields._bank_kernel`).
 
-Out-of-grid rule: a point's continuous index is clamped to the span of voxel centres, i.e. it gets the
-value of the nearest boundary sample ("clamp to edge"), and ``inside`` is False for it. Callers that
-prefer "free space outside the window" can use ``inside`` to override (e.g. d = large, F = 0).
+A bank is allocated from its layout (grid and goal count per scene) and filled scene by scene, so building
+it never holds more than one scene's arrays on the host besides the bank itself.
+
+Out-of-grid rule: a point's continuous index is clamped to the span of voxel centres ("clamp to edge") and
+``inside`` is False for it.
 """
 
 from __future__ import annotations
 
+import ctypes
 import os
+import sys
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 import torch
 import warp as wp
 
+from cat.fields._bank_kernel import query_kernel, vec7
 from cat.fields._wp import get_device, run_concurrently
 from cat.fields.config import FieldCfg
-from cat.fields.field import CHANNELS, NUM_CHANNELS, Field
+from cat.fields.field import Field
 from cat.fields.grid import Grid
 from cat.fields.humanoid_pf import humanoid_pf
+from cat.fields.store import SceneFields
 
-vec8 = wp.types.vector(length=NUM_CHANNELS, dtype=wp.float32)
+SCENE_CHANNELS = ("sdf", "gx", "gy", "gz")
+GOAL_CHANNELS = ("fx", "fy", "fz")
+QUERY_CHANNELS = ("fx", "fy", "fz", "sdf", "gx", "gy", "gz")
+"""Channels of :attr:`FieldSample.values`."""
+DTYPES = {"float32": (torch.float32, wp.float32), "float16": (torch.float16, wp.float16)}
 
 
-@wp.kernel
-def _query_kernel(
-    bank: wp.array(dtype=vec8),
-    origins: wp.array(dtype=wp.vec3),
-    field_idx: wp.array(dtype=wp.int32),
-    points: wp.array(dtype=wp.vec3),
-    links: int,
-    nx: int,
-    ny: int,
-    nz: int,
-    inv_voxel: float,
-    out: wp.array(dtype=vec8),
-    inside: wp.array(dtype=wp.bool),
-):
-    """One thread per env: trilinear interpolation of all channels at its ``links`` points."""
-    e = wp.tid()
-    f = field_idx[e]
-    org = origins[f]
-    sx = ny * nz
-    fbase = f * nx * sx
-    o1 = wp.where(nx > 1, sx, 0)
-    o2 = wp.where(ny > 1, nz, 0)
-    o3 = wp.where(nz > 1, 1, 0)
-    hx = float(nx - 1)
-    hy = float(ny - 1)
-    hz = float(nz - 1)
-    for l in range(links):
-        t = e * links + l
-        u = (points[t] - org) * inv_voxel
-        if not (wp.isfinite(u[0]) and wp.isfinite(u[1]) and wp.isfinite(u[2])):
-            u = wp.vec3(-1.0, -1.0, -1.0)  # NaN/inf point: grid corner value, inside = False
-        inside[t] = (
-            u[0] >= 0.0
-            and u[1] >= 0.0
-            and u[2] >= 0.0
-            and u[0] <= float(nx)
-            and u[1] <= float(ny)
-            and u[2] <= float(nz)
-        )
-        # continuous index of voxel centres, clamped to the grid's centre span ("clamp to edge")
-        cx = wp.clamp(u[0] - 0.5, 0.0, hx)
-        cy = wp.clamp(u[1] - 0.5, 0.0, hy)
-        cz = wp.clamp(u[2] - 0.5, 0.0, hz)
-        i0 = wp.min(int(cx), wp.max(nx - 2, 0))
-        j0 = wp.min(int(cy), wp.max(ny - 2, 0))
-        k0 = wp.min(int(cz), wp.max(nz - 2, 0))
-        fx = cx - float(i0)
-        fy = cy - float(j0)
-        fz = cz - float(k0)
-        gx = 1.0 - fx
-        gy = 1.0 - fy
-        gz = 1.0 - fz
-        b = fbase + i0 * sx + j0 * nz + k0
-        c00 = gz * bank[b] + fz * bank[b + o3]
-        c01 = gz * bank[b + o2] + fz * bank[b + o2 + o3]
-        c10 = gz * bank[b + o1] + fz * bank[b + o1 + o3]
-        c11 = gz * bank[b + o1 + o2] + fz * bank[b + o1 + o2 + o3]
-        out[t] = gx * (gy * c00 + fy * c01) + fx * (gy * c10 + fy * c11)
+@dataclass(frozen=True)
+class SceneLayout:
+    """Storage of one scene: its grid and how many goal fields it has."""
+
+    grid: Grid
+    num_goals: int
 
 
 @dataclass
@@ -93,7 +53,7 @@ class FieldSample:
     """Query result, torch tensors of shape (N, K, ...)."""
 
     values: torch.Tensor
-    """(N, K, 8) all channels (see :data:`cat.fields.field.CHANNELS`)."""
+    """(N, K, 7) channels :data:`QUERY_CHANNELS`: F, d, ∇d."""
     inside: torch.Tensor
     """(N, K) bool: the point lies in its field's grid box."""
 
@@ -109,80 +69,230 @@ class FieldSample:
     def grad_sdf(self) -> torch.Tensor:
         return self.values[..., 4:7]
 
-    @property
-    def geodesic(self) -> torch.Tensor:
-        return self.values[..., 7]
+
+def bank_bytes(layouts: Sequence[SceneLayout], dtype: str = "float32") -> int:
+    """Storage a bank of ``layouts`` needs (bytes), without allocating it."""
+    item = torch.tensor([], dtype=_dtype(dtype)[0]).element_size()
+    vox = [lay.grid.num_voxels for lay in layouts]
+    return item * sum(
+        n * (len(SCENE_CHANNELS) + len(GOAL_CHANNELS) * lay.num_goals) for n, lay in zip(vox, layouts, strict=True)
+    )
+
+
+def advise_huge_pages(t: torch.Tensor) -> bool:
+    """Ask Linux to back a large CPU tensor with 2 MiB pages (``madvise(MADV_HUGEPAGE)``), best effort.
+
+    The query's random gathers over a multi-GB bank miss the TLB on nearly every read with 4 KiB pages; huge
+    pages cover 512× more memory per TLB entry. Returns whether the call was made and succeeded."""
+    if sys.platform != "linux" or t.nbytes < 4 * _HUGE:
+        return False
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        a0 = (t.data_ptr() + _HUGE - 1) & ~(_HUGE - 1)
+        a1 = (t.data_ptr() + t.nbytes) & ~(_HUGE - 1)
+        return libc.madvise(ctypes.c_void_p(a0), ctypes.c_size_t(a1 - a0), _MADV_HUGEPAGE) == 0
+    except (OSError, AttributeError):
+        return False
+
+
+_HUGE = 1 << 21
+_MADV_HUGEPAGE = 14
+
+
+def _dtype(name: str) -> tuple[torch.dtype, type]:
+    if name not in DTYPES:
+        raise ValueError(f"bank dtype must be one of {sorted(DTYPES)}, got {name!r}")
+    return DTYPES[name]
 
 
 class FieldBank:
-    """(n_fields, nx, ny, nz, 8) float32 tensor of fields sharing shape and voxel, with per-field origins.
+    """Fields of many scenes (mixed grid shapes) × goals. Field ``i`` = (scene ``field_scene[i]``, a goal).
 
-    On the CPU the query is memory-bound gathers on one core per launch; ``num_threads`` > 1 splits the
-    envs over that many concurrent launches (Python threads; the launch releases the GIL)."""
+    Allocate with a layout, then fill every scene with :meth:`set_scene` (or use :meth:`build`,
+    :meth:`from_scenes`, :meth:`from_fields`). On the CPU the query is memory-bound gathers on one core
+    per launch; ``num_threads`` > 1 splits the points over that many concurrent launches."""
 
     def __init__(
         self,
-        data: torch.Tensor,
-        origins: torch.Tensor,
-        voxel: float,
-        goals: torch.Tensor | None = None,
+        layouts: Sequence[SceneLayout],
+        dtype: str = "float32",
+        device: str | torch.device = "cpu",
         num_threads: int | None = None,
     ):
-        if data.ndim != 5 or data.shape[-1] != NUM_CHANNELS:
-            raise ValueError(f"bank data must be (n_fields, nx, ny, nz, {NUM_CHANNELS}), got {tuple(data.shape)}")
-        if origins.shape != (data.shape[0], 3):
-            raise ValueError(f"origins must be ({data.shape[0]}, 3), got {tuple(origins.shape)}")
-        self.data = data.to(torch.float32).contiguous()
-        self.origins = origins.to(self.data.device, torch.float32).contiguous()
-        self.voxel = float(voxel)
-        self.goals = None if goals is None else goals.to(self.data.device, torch.float32)
-        self.device = self.data.device
-        self._wp_device = get_device("cpu" if self.device.type == "cpu" else f"cuda:{self.device.index or 0}")
+        if not layouts:
+            raise ValueError("FieldBank needs at least one scene")
+        for lay in layouts:
+            if lay.num_goals < 1:
+                raise ValueError(f"every scene needs at least one goal field, got {lay.num_goals}")
+        self.dtype_name = dtype
+        self.dtype, self._wp_scalar = _dtype(dtype)
+        self.device = torch.device(device)
+        self.layouts = list(layouts)
+        vox = np.array([lay.grid.num_voxels for lay in layouts], dtype=np.int64)
+        goals = np.array([lay.num_goals for lay in layouts], dtype=np.int64)
+        scene_offset = np.concatenate(([0], np.cumsum(vox)[:-1]))
+        self.field_start = np.concatenate(([0], np.cumsum(goals))).astype(np.int64)
+        field_scene = np.repeat(np.arange(len(layouts)), goals)
+        field_vox = vox[field_scene]
+        field_offset = np.concatenate(([0], np.cumsum(field_vox)[:-1]))
+        dev, i64 = self.device, torch.int64
+        self.scene_data = torch.empty(int(vox.sum()) * len(SCENE_CHANNELS), dtype=self.dtype, device=dev)
+        self.goal_data = torch.empty(int(field_vox.sum()) * len(GOAL_CHANNELS), dtype=self.dtype, device=dev)
+        if dev.type == "cpu":  # before the first write: pages are allocated on touch
+            advise_huge_pages(self.scene_data)
+            advise_huge_pages(self.goal_data)
+        self.scene_offset = torch.as_tensor(scene_offset, dtype=i64, device=dev)
+        self.field_offset = torch.as_tensor(field_offset, dtype=i64, device=dev)
+        self.field_scene = torch.as_tensor(field_scene, dtype=torch.int32, device=dev)
+        self.scene_shape = torch.tensor([lay.grid.shape for lay in layouts], dtype=torch.int32, device=dev)
+        self.scene_origin = torch.tensor([lay.grid.origin for lay in layouts], dtype=torch.float32, device=dev)
+        self.scene_voxel = torch.tensor([lay.grid.voxel for lay in layouts], dtype=torch.float32, device=dev)
+        self.goals = torch.zeros(len(field_scene), 3, dtype=torch.float32, device=dev)
+        self._inv_voxel = (1.0 / self.scene_voxel).contiguous()
+        self._unfilled = set(range(len(layouts)))
+        self._wp_device = get_device("cpu" if dev.type == "cpu" else f"cuda:{dev.index or 0}")
+        self._set_ptr_shift(0)
         if num_threads is None:
             num_threads = min(2, os.cpu_count() or 1)
         self.num_threads = max(1, int(num_threads)) if self._wp_device.is_cpu else 1
 
+    # --- layout ------------------------------------------------------------------------------------------
+    @property
+    def num_scenes(self) -> int:
+        return len(self.layouts)
+
     @property
     def num_fields(self) -> int:
-        return int(self.data.shape[0])
+        return int(self.field_scene.shape[0])
 
     @property
-    def shape(self) -> tuple[int, int, int]:
-        return tuple(int(s) for s in self.data.shape[1:4])
+    def nbytes(self) -> int:
+        """Bytes of field storage (both buffers)."""
+        return self.scene_data.nbytes + self.goal_data.nbytes
+
+    def scene_grid(self, s: int) -> Grid:
+        """Grid of scene ``s`` as placed in the bank (its origin includes any offset given at fill time)."""
+        g = self.layouts[s].grid
+        return Grid(tuple(self.scene_origin[s].tolist()), g.voxel, g.shape)
 
     def grid(self, i: int) -> Grid:
-        return Grid(tuple(self.origins[i].tolist()), self.voxel, self.shape)
+        """Grid of field ``i``."""
+        return self.scene_grid(int(self.field_scene[i]))
+
+    def fields_of(self, s: int) -> range:
+        """Field indices of scene ``s`` (one per goal, in goal order)."""
+        return range(int(self.field_start[s]), int(self.field_start[s + 1]))
+
+    def field_bounds(self, field_idx: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Lower and upper corners (N, 3) of the grid boxes of fields ``field_idx`` (N,)."""
+        s = self.field_scene[field_idx.to(self.device, torch.long)].long()
+        lo = self.scene_origin[s]
+        return lo, lo + self.scene_shape[s].to(torch.float32) * self.scene_voxel[s, None]
+
+    # --- filling -----------------------------------------------------------------------------------------
+    def _scene_view(self, s: int) -> torch.Tensor:
+        n = self.layouts[s].grid.num_voxels
+        c = len(SCENE_CHANNELS)
+        o = int(self.scene_offset[s]) * c
+        return self.scene_data[o : o + n * c].view(*self.layouts[s].grid.shape, c)
+
+    def _field_view(self, i: int) -> torch.Tensor:
+        grid = self.layouts[int(self.field_scene[i])].grid
+        c = len(GOAL_CHANNELS)
+        o = int(self.field_offset[i]) * c
+        return self.goal_data[o : o + grid.num_voxels * c].view(*grid.shape, c)
+
+    def set_scene(self, s: int, data: SceneFields | list[Field], offset=(0.0, 0.0, 0.0)) -> None:
+        """Write scene ``s``'s d, ∇d and every goal's F; its grid origin and goals are shifted by ``offset``."""
+        sf = data if isinstance(data, SceneFields) else SceneFields.from_fields(data)
+        lay = self.layouts[s]
+        if sf.grid.shape != lay.grid.shape or not np.isclose(sf.grid.voxel, lay.grid.voxel):
+            raise ValueError(f"scene {s}: fields on grid {sf.grid.shape}/{sf.grid.voxel}, bank expects {lay.grid}")
+        if sf.num_goals != lay.num_goals:
+            raise ValueError(f"scene {s}: {sf.num_goals} goal fields, bank expects {lay.num_goals}")
+        off = np.asarray(offset, dtype=np.float64).reshape(3)
+        self._scene_view(s).copy_(torch.from_numpy(sf.sdf_grad))
+        for g, i in enumerate(self.fields_of(s)):
+            self._field_view(i).copy_(torch.from_numpy(sf.force[g]))
+        fs = self.fields_of(s)
+        self.goals[fs.start : fs.stop] = torch.as_tensor(sf.goals + off, dtype=torch.float32, device=self.device)
+        self.scene_origin[s] = torch.as_tensor(np.asarray(sf.grid.origin) + off, dtype=torch.float32)
+        self._unfilled.discard(s)
+
+    def set_field(self, i: int, f: Field, offset=(0.0, 0.0, 0.0)) -> None:
+        """Replace field ``i``'s F and goal (e.g. a rebuild for a clicked goal in the same scene).
+
+        d and ∇d belong to the scene and are left as they are: use :meth:`set_scene` for new obstacles."""
+        s = int(self.field_scene[i])
+        if f.grid.shape != self.layouts[s].grid.shape:
+            raise ValueError(f"field grid {f.grid.shape} does not match scene {s}'s {self.layouts[s].grid.shape}")
+        self._field_view(i).copy_(torch.from_numpy(np.ascontiguousarray(f.force)))
+        self.goals[i] = torch.as_tensor(np.asarray(f.goal) + np.asarray(offset), dtype=torch.float32)
 
     @classmethod
-    def from_fields(
-        cls, fields: list[Field], device: str | torch.device = "cpu", num_threads: int | None = None
+    def build(
+        cls,
+        layouts: Sequence[SceneLayout],
+        load: Callable[[int], SceneFields | list[Field]],
+        offsets: Sequence | None = None,
+        dtype: str = "float32",
+        device: str | torch.device = "cpu",
+        num_threads: int | None = None,
     ) -> FieldBank:
-        """Stack built fields (same shape and voxel) into a bank on ``device``."""
+        """Allocate for ``layouts`` and fill scene ``s`` with ``load(s)`` one at a time (no full host copy)."""
+        bank = cls(layouts, dtype, device, num_threads)
+        for s in range(len(layouts)):
+            bank.set_scene(s, load(s), (0.0, 0.0, 0.0) if offsets is None else offsets[s])
+        return bank
+
+    @classmethod
+    def from_scenes(
+        cls, scenes: Sequence[SceneFields | list[Field]], dtype: str = "float32", device="cpu", num_threads=None
+    ) -> FieldBank:
+        """One bank scene per entry (a ``SceneFields`` or the list of one scene's goal fields)."""
+        sfs = [s if isinstance(s, SceneFields) else SceneFields.from_fields(s) for s in scenes]
+        layouts = [SceneLayout(sf.grid, sf.num_goals) for sf in sfs]
+        return cls.build(layouts, lambda s: sfs[s], dtype=dtype, device=device, num_threads=num_threads)
+
+    @classmethod
+    def from_fields(cls, fields: list[Field], dtype: str = "float32", device="cpu", num_threads=None) -> FieldBank:
+        """Each field as its own scene (no sharing of d, ∇d): field ``i`` of the bank is ``fields[i]``."""
         if not fields:
             raise ValueError("FieldBank needs at least one field")
-        shape, voxel = fields[0].grid.shape, fields[0].grid.voxel
-        for f in fields:
-            if f.grid.shape != shape or not np.isclose(f.grid.voxel, voxel):
-                raise ValueError("all fields of a bank must share grid shape and voxel size")
-        data = torch.from_numpy(np.stack([f.data for f in fields])).to(device)
-        origins = torch.tensor([f.grid.origin for f in fields], dtype=torch.float32, device=device)
-        goals = torch.tensor(np.stack([f.goal for f in fields]), dtype=torch.float32, device=device)
-        return cls(data, origins, voxel, goals, num_threads)
+        return cls.from_scenes([[f] for f in fields], dtype, device, num_threads)
 
-    def set_field(self, i: int, f: Field) -> None:
-        """Replace field ``i`` in place (e.g. a rebuild for a clicked goal)."""
-        if f.grid.shape != self.shape or not np.isclose(f.grid.voxel, self.voxel):
-            raise ValueError("field grid does not match the bank's shape/voxel")
-        self.data[i] = torch.from_numpy(f.data).to(self.device)
-        self.origins[i] = torch.tensor(f.grid.origin, dtype=torch.float32, device=self.device)
-        if self.goals is not None:
-            self.goals[i] = torch.tensor(f.goal, dtype=torch.float32, device=self.device)
+    # --- query -------------------------------------------------------------------------------------------
+    def _set_ptr_shift(self, shift: int) -> None:
+        """Address the buffers from base pointers ``shift`` elements *below* them, with every offset raised by
+        ``shift``: the same memory, reached through offsets past 2^31 (or 2^32) elements. Tests use this to
+        check 64-bit addressing without allocating a bank that large."""
+        self._ptr_shift = int(shift)
+        self._offsets = (self.scene_offset + shift, self.field_offset + shift)  # kept alive: Warp aliases them
+        self._meta = [
+            wp.from_torch(self._offsets[0], dtype=wp.int64),
+            wp.from_torch(self.scene_shape, dtype=wp.vec3i),
+            wp.from_torch(self.scene_origin, dtype=wp.vec3),
+            wp.from_torch(self._inv_voxel, dtype=wp.float32),
+            wp.from_torch(self.field_scene, dtype=wp.int32),
+            wp.from_torch(self._offsets[1], dtype=wp.int64),
+        ]
+
+    def _pointers(self) -> tuple[int, int, list]:
+        shift = self._ptr_shift
+        scene = (self.scene_data.data_ptr() - shift * self.scene_data.element_size() * len(SCENE_CHANNELS)) % 2**64
+        goal = (self.goal_data.data_ptr() - shift * self.goal_data.element_size() * len(GOAL_CHANNELS)) % 2**64
+        return scene, goal, self._meta
+
+    def _check_ready(self) -> None:
+        if self._unfilled:
+            raise RuntimeError(f"field bank: {len(self._unfilled)} scene(s) never filled, e.g. {min(self._unfilled)}")
 
     def query(self, field_idx: torch.Tensor, points: torch.Tensor, out: FieldSample | None = None) -> FieldSample:
-        """Trilinear values of all channels at ``points`` (N, K, 3) in fields ``field_idx`` (N,).
+        """Trilinear F, d, ∇d at ``points`` (N, K, 3) in fields ``field_idx`` (N,).
 
         Non-finite points get the value at the grid's first voxel and ``inside`` False. On the CPU a
         field index out of range raises IndexError (on CUDA it is the caller's job: no host sync here)."""
+        self._check_ready()
         if points.ndim != 3 or points.shape[-1] != 3:
             raise ValueError(f"points must be (N, K, 3), got {tuple(points.shape)}")
         n, k = points.shape[:2]
@@ -196,32 +306,28 @@ class FieldBank:
                 raise IndexError(f"field_idx out of range [0, {self.num_fields}): min {lo}, max {hi}")
         if out is None:
             out = FieldSample(
-                torch.empty((n, k, NUM_CHANNELS), dtype=torch.float32, device=self.device),
+                torch.empty((n, k, len(QUERY_CHANNELS)), dtype=torch.float32, device=self.device),
                 torch.empty((n, k), dtype=torch.bool, device=self.device),
             )
-        nx, ny, nz = self.shape
-        bank = wp.from_torch(self.data.view(-1, NUM_CHANNELS), dtype=vec8)
-        origins = wp.from_torch(self.origins, dtype=wp.vec3)
-        values = out.values.view(-1, NUM_CHANNELS)
+        kernel = query_kernel(self._wp_scalar)
+        scene_ptr, goal_ptr, meta = self._pointers()
+        values = out.values.view(-1, len(QUERY_CHANNELS))
         inside = out.inside.view(-1)
 
         def launch(e0: int, e1: int) -> None:
             if e1 <= e0:
                 return
             wp.launch(
-                _query_kernel,
-                dim=e1 - e0,
+                kernel,
+                dim=(e1 - e0) * k,
                 inputs=[
-                    bank,
-                    origins,
+                    scene_ptr,
+                    goal_ptr,
+                    *meta,
                     wp.from_torch(idx[e0:e1], dtype=wp.int32),
                     wp.from_torch(pts[e0:e1].view(-1, 3), dtype=wp.vec3),
                     k,
-                    nx,
-                    ny,
-                    nz,
-                    1.0 / self.voxel,
-                    wp.from_torch(values[e0 * k : e1 * k], dtype=vec8),
+                    wp.from_torch(values[e0 * k : e1 * k], dtype=vec7),
                     wp.from_torch(inside[e0 * k : e1 * k], dtype=wp.bool),
                 ],
                 device=self._wp_device,
@@ -247,4 +353,4 @@ class FieldBank:
         return s, humanoid_pf(s.force, s.grad_sdf, s.sdf, velocities.to(s.values), w0, cfg.lam)
 
 
-__all__ = ["CHANNELS", "FieldBank", "FieldSample"]
+__all__ = ["FieldBank", "FieldSample", "QUERY_CHANNELS", "SceneLayout", "bank_bytes"]

@@ -92,3 +92,29 @@ def main(argv: list[str] | None = None) -> None:
 
 if __name__ == "__main__":
     main()
+
+
+def bank_precision(scenes: list, points_per_field: int = 20000, seed: int = 0) -> dict[str, float]:
+    """Error of a float16 bank against the float32 bank of the same ``SceneFields`` at random points in
+    each field's grid: |Δd| and |Δ∇d| (m, unitless), the angle between F directions (degrees, where
+    |F| > 1e-3) and |Δ|F||/|F|. Returns max and 99th percentile of each."""
+    rng = np.random.default_rng(seed)
+    b32 = FieldBank.from_scenes(scenes, dtype="float32")
+    b16 = FieldBank.from_scenes(scenes, dtype="float16")
+    idx = torch.arange(b32.num_fields, dtype=torch.int32).repeat_interleave(points_per_field // 100)
+    lo, hi = b32.field_bounds(idx)
+    pts = lo[:, None] + torch.as_tensor(rng.uniform(0, 1, (len(idx), 100, 3)), dtype=torch.float32) * (hi - lo)[:, None]
+    a, b = b32.query(idx, pts), b16.query(idx, pts)
+    dd = (a.sdf - b.sdf).abs().flatten()
+    dg = (a.grad_sdf - b.grad_sdf).norm(dim=-1).flatten()
+    fa, fb = a.force.reshape(-1, 3), b.force.reshape(-1, 3)
+    na, nb = fa.norm(dim=-1), fb.norm(dim=-1)
+    ok = na > 1e-3
+    cos = ((fa * fb).sum(-1)[ok] / (na[ok] * nb[ok]).clamp_min(1e-12)).clamp(-1, 1)
+    ang = torch.rad2deg(torch.acos(cos.double()))
+    rel = ((na - nb).abs() / na)[ok]
+    out = {}
+    for name, v in (("sdf_m", dd), ("grad_sdf", dg), ("force_deg", ang), ("force_rel", rel)):
+        out[f"{name}_max"] = float(v.max())
+        out[f"{name}_p99"] = float(torch.quantile(v.double()[: 1 << 24], 0.99))
+    return out

@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+import math
+from dataclasses import asdict, dataclass, fields
 
 
 @dataclass
@@ -32,3 +33,33 @@ class FieldCfg:
 
     def to_dict(self) -> dict:
         return asdict(self)
+
+    def build_dict(self) -> dict:
+        """The constants a built field depends on (:data:`BUILD_KEYS`); the others act at query time."""
+        return {k: getattr(self, k) for k in BUILD_KEYS}
+
+
+BUILD_KEYS = ("eta", "d0", "xi", "d_min", "goal_init_radius")
+"""FieldCfg entries baked into stored F and d: a saved field built under other values is stale."""
+
+
+class StaleFieldError(ValueError):
+    """A saved field does not match what is asked for (other build constants, grid or goals): rebuild it."""
+
+
+def cfg_from_dict(values: dict) -> FieldCfg:
+    """FieldCfg from saved values, ignoring keys this version does not know (missing ones take defaults)."""
+    known = {f.name for f in fields(FieldCfg)}
+    return FieldCfg(**{k: v for k, v in values.items() if k in known})
+
+
+def check_built_with(saved: dict, cfg: FieldCfg, source: str) -> None:
+    """Raise :class:`StaleFieldError` (one line, naming ``source`` and the differing constants) unless the
+    saved build constants equal ``cfg``'s."""
+    diff = []
+    for k in BUILD_KEYS:
+        want, got = float(getattr(cfg, k)), saved.get(k)
+        if got is None or not math.isclose(float(got), want, rel_tol=1e-9, abs_tol=0.0):
+            diff.append(f"{k} saved {got} != {want}")
+    if diff:
+        raise StaleFieldError(f"{source}: built under another field config ({'; '.join(diff)})")

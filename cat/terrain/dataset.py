@@ -1,7 +1,7 @@
 """Scene dataset builder behind ``scripts/gen_scenes.py``: one folder per scene, resumable.
 
 Layout: ``<out>/typical/<kind>_<v>``, ``<out>/procedural/proc_<i>``, ``<out>/indoor/indoor_<i>``, each a
-``Scene`` folder (``scene.json`` + ``mesh.ply``) plus ``fields/goal_<g>.npz`` when ``cat.fields`` is
+``Scene`` folder (``scene.json`` + ``mesh.ply``) plus ``fields/humanoid_pf.npz`` when ``cat.fields`` is
 available, and a ``done`` marker written last. Folders with ``done`` are skipped on a re-run; a folder with
 a ``scene.json`` but no ``done`` (e.g. fields not yet available) is loaded and only its missing fields are
 computed. ``index.json`` lists
@@ -16,6 +16,7 @@ import logging
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -46,7 +47,8 @@ class GenScenesCfg:
     future_dir: str | None = None  # 3D-FUTURE model folder (<jid>/raw_model.obj)
     fields: bool = True  # precompute HumanoidPF per goal when cat.fields is available
     field_source: str = "occupancy"  # "occupancy" (the scene's voxels) or "mesh"
-    max_field_goals: int = -1  # fields for the first N goals only (-1: all); a field is ~2-25 MB
+    max_field_goals: int = -1  # fields for the first N goals only (-1: all)
+    field_dtype: str = "float32"  # storage of fields/humanoid_pf.npz: float32 or float16 (half the disk)
     convex_parts: bool = False  # warm the coacd cache for the MuJoCo export
     render: bool = False  # write preview.png per scene
 
@@ -106,37 +108,67 @@ def _front3d_houses(cfg: GenScenesCfg) -> list[House]:
 
 @functools.lru_cache(maxsize=1)
 def _field_api():
+    """``cat.fields`` (and its store module), or None when it cannot be imported."""
     try:
-        from cat.fields import Grid, build_field
+        import cat.fields as fields_api
+        from cat.fields import store
     except ImportError as err:
         log.warning("cat.fields not available (%s): fields are not precomputed", err)
         return None
-    return Grid, build_field
+    return SimpleNamespace(api=fields_api, store_file=store.STORE_FILE)
 
 
-def build_fields(scene: Scene, folder: Path, source: str = "occupancy", max_goals: int = -1) -> bool:
-    """Precompute one HumanoidPF per goal into ``folder/fields``; True when all (or ``max_goals``) exist."""
-    api = _field_api()
-    if api is None:
+def build_fields(
+    scene: Scene, folder: Path, source: str = "occupancy", max_goals: int = -1, dtype: str = "float32"
+) -> bool:
+    """Precompute HumanoidPF for the scene's goals (or the first ``max_goals``) into
+    ``folder/fields/humanoid_pf.npz`` (d, ∇d once, F per goal, the FieldCfg); True when it is there and
+    current. A file built under other field constants, grid or goals is rebuilt."""
+    ns = _field_api()
+    if ns is None:
         return False
-    Grid, build_field = api
-    g = scene.grid()
-    grid = Grid(g.origin, g.voxel, g.shape)
-    obstacles = scene.occupancy() if source == "occupancy" else scene.mesh
-    out = Scene.fields_dir(folder)
-    out.mkdir(exist_ok=True)
+    fa = ns.api
     if source not in ("occupancy", "mesh"):
         raise ValueError(f"field_source must be 'occupancy' or 'mesh', got {source!r}")
+    g = scene.grid()
+    grid = fa.Grid(g.origin, g.voxel, g.shape)
     goals = scene.goals if max_goals < 0 else scene.goals[:max_goals]
-    for i, goal in enumerate(goals):
-        path = out / f"goal_{i:02d}.npz"
-        if path.exists():
-            continue
+    out = Scene.fields_dir(folder)
+    path = out / ns.store_file
+    cfg = fa.FieldCfg()
+    if path.is_file():
         try:
-            build_field(obstacles, grid, goal).save(path)
-        except Exception as err:  # another team's package: never lose the scene over it
-            log.warning("%s: field for goal %d failed (%s: %s); skipping fields", folder, i, type(err).__name__, err)
-            return False
+            fa.SceneFields.check(path, cfg, grid, goals)
+            return True
+        except (fa.StaleFieldError, OSError, KeyError) as err:
+            log.warning("%s; rebuilding", err)
+    out.mkdir(exist_ok=True)
+    obstacles = scene.occupancy() if source == "occupancy" else scene.mesh
+    try:
+        fa.SceneFields.from_fields(fa.build_fields(obstacles, grid, goals, cfg)).save(path, dtype)
+    except Exception as err:  # another team's package: never lose the scene over it
+        log.warning("%s: fields failed (%s: %s); skipping fields", folder, type(err).__name__, err)
+        return False
+    return True
+
+
+def fields_current(folder: Path, max_goals: int = -1) -> bool:
+    """True when ``folder/fields/humanoid_pf.npz`` matches the current FieldCfg, the scene's grid and goals
+    (reads only the scene JSON and the file's header entries, not the arrays)."""
+    ns = _field_api()
+    if ns is None:
+        return True  # nothing to compare against: leave the folder alone
+    fa = ns.api
+    raw = json.loads((folder / SCENE_FILE).read_text())
+    goals = np.asarray(raw["goals"], dtype=np.float64)
+    goals = goals if max_goals < 0 else goals[:max_goals]
+    g = raw["grid"]
+    grid = fa.Grid(tuple(g["origin"]), float(g["voxel"]), tuple(g["shape"]))
+    try:
+        fa.SceneFields.check(Scene.fields_dir(folder) / ns.store_file, fa.FieldCfg(), grid, goals)
+    except (fa.StaleFieldError, OSError, KeyError) as err:
+        log.warning("%s; rebuilding", err)
+        return False
     return True
 
 
@@ -148,11 +180,14 @@ def build_one(job: Job, cfg: GenScenesCfg) -> dict:
     else:
         scene = job.make()
         scene.save(folder)
-    complete = build_fields(scene, folder, cfg.field_source, cfg.max_field_goals) if cfg.fields else True
+    complete = (
+        build_fields(scene, folder, cfg.field_source, cfg.max_field_goals, cfg.field_dtype) if cfg.fields else True
+    )
     if cfg.convex_parts:
-        from cat.terrain.mujoco_export import convex_parts
+        from cat.terrain.mujoco_export import convex_parts, uses_voxels
 
-        convex_parts(scene.mesh)
+        if not uses_voxels(scene):  # voxel scenes need no decomposition (height fields + boxes on load)
+            convex_parts(scene.mesh)
     if cfg.render:
         from cat.terrain.render import render_scene
 
@@ -174,6 +209,8 @@ def build_dataset(cfg: GenScenesCfg, progress: bool = True) -> list[dict]:
     index = []
     skipped = 0
     for job in tqdm(todo, desc="scenes", unit="scene", disable=not progress):
+        if (job.folder / DONE_FILE).is_file() and cfg.fields and not fields_current(job.folder, cfg.max_field_goals):
+            (job.folder / DONE_FILE).unlink()  # stale or missing fields: rebuilt by build_one below
         if (job.folder / DONE_FILE).is_file():
             skipped += 1
             raw = json.loads((job.folder / SCENE_FILE).read_text())

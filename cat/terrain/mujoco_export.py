@@ -1,13 +1,16 @@
-"""Scene obstacles in MuJoCo: convex parts (coacd, cached by mesh hash) attached to an ``MjSpec``.
+"""Scene obstacles in MuJoCo: convex parts (or voxel height fields and boxes) attached to an ``MjSpec``.
 
 Collision convention (shared with ``cat.envs.robot``, duplicated here so terrain does not import envs; a
 test checks they agree): obstacles have ``contype = 0``, ``conaffinity = OBSTACLE_BIT``, ``condim = 3``
 and all hang on one static body ``OBSTACLE_BODY``, a child of the world body.
 
-Convex parts: the mesh is split into connected components; closed convex components (every part of a
-typical or embedded-indoor scene: boxes, prisms) are used as they are, others go through coacd with
-modest settings (``CoacdCfg``). coacd results are cached in ``$CAT_CACHE_DIR/coacd`` (default
-``~/.cache/cat/coacd``) under a hash of the component's vertices, faces and the settings.
+Scenes made of voxels (procedural obstacles, re-meshed crops: :func:`uses_voxels`) get their collision
+geometry from the occupancy grid the fields are built from (``cat.terrain.voxel_collision``: height-field
+tiles plus boxes, milliseconds, within half a voxel to a voxel of the solid). Other scenes use convex parts:
+the mesh is split into connected components; closed convex components (every part of a typical or
+embedded-indoor scene: boxes, prisms) are used as they are, others go through coacd with modest settings
+(``CoacdCfg``). coacd results are cached in ``$CAT_CACHE_DIR/coacd`` (default ``~/.cache/cat/coacd``) under
+a hash of the component's vertices, faces and the settings.
 """
 
 from __future__ import annotations
@@ -24,6 +27,8 @@ import numpy as np
 import trimesh
 
 from cat.terrain.scene import Scene, SceneError
+from cat.terrain.voxel import GridSpec
+from cat.terrain.voxel_collision import VoxelCollisionCfg, add_voxel_parts_to_spec, voxel_parts
 
 log = logging.getLogger(__name__)
 
@@ -102,6 +107,11 @@ def convex_parts(
     return parts
 
 
+def uses_voxels(scene: Scene) -> bool:
+    """Whether a scene's obstacles are voxels (procedural, or re-meshed from a rasterisation)."""
+    return scene.kind == "procedural" or bool(scene.meta.get("remeshed"))
+
+
 def add_obstacles_to_spec(
     spec: mujoco.MjSpec,
     scene_or_parts: Scene | trimesh.Trimesh | list[trimesh.Trimesh],
@@ -110,20 +120,38 @@ def add_obstacles_to_spec(
     body_name: str = OBSTACLE_BODY,
     conaffinity: int = OBSTACLE_BIT,
     rgba: tuple[float, float, float, float] = (0.75, 0.55, 0.35, 1.0),
+    offset=(0.0, 0.0, 0.0),
+    voxel_cfg: VoxelCollisionCfg | None = None,
+    method: str = "auto",
 ) -> int:
-    """Add the obstacles as convex mesh geoms on a static world child ``body_name``; returns the geom count.
+    """Add the obstacles, moved by ``offset``, as geoms of a static world child ``body_name``; returns the
+    geom count.
 
-    ``scene_or_parts`` is a scene or mesh (decomposed by ``convex_parts``) or a list of convex parts.
+    ``scene_or_parts`` is a scene (voxel height fields and boxes when :func:`uses_voxels`, else convex parts),
+    a mesh (decomposed by ``convex_parts``) or a list of convex parts. ``method="convex"`` forces convex
+    parts for a voxel scene, ``"voxel"`` voxel geometry for any scene.
     """
+    if method not in ("auto", "voxel", "convex"):
+        raise ValueError(f"method must be 'auto', 'voxel' or 'convex', got {method!r}")
+    body = spec.body(body_name)
+    if body is None:
+        body = spec.worldbody.add_body(name=body_name)
+    off = np.asarray(offset, dtype=np.float64).reshape(3)
+    is_scene = isinstance(scene_or_parts, Scene)
+    if is_scene and (method == "voxel" or (method == "auto" and uses_voxels(scene_or_parts))):
+        g = scene_or_parts.grid()
+        grid = GridSpec(tuple(float(v) for v in np.asarray(g.origin) + off), g.voxel, g.shape)
+        vparts = voxel_parts(scene_or_parts.occupancy(), grid, voxel_cfg)
+        prefix = f"{body_name}_{len(spec.geoms)}_"
+        return add_voxel_parts_to_spec(spec, vparts, body, prefix, conaffinity, rgba, voxel_cfg)
     if isinstance(scene_or_parts, Scene):
         parts = convex_parts(scene_or_parts.mesh, cfg, cache)
     elif isinstance(scene_or_parts, trimesh.Trimesh):
         parts = convex_parts(scene_or_parts, cfg, cache)
     else:
         parts = list(scene_or_parts)
-    body = spec.body(body_name)
-    if body is None:
-        body = spec.worldbody.add_body(name=body_name)
+    if np.any(off != 0.0):
+        parts = [p.copy().apply_translation(off) for p in parts]
     prefix = f"{body_name}_{len(spec.meshes)}_"
     n = 0
     for part in parts:

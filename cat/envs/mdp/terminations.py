@@ -27,3 +27,9 @@ def collided(env: TraversalEnv) -> torch.Tensor:
 def non_finite(env: TraversalEnv) -> torch.Tensor:
     """Diverged physics (NaN/inf state) ends the episode instead of poisoning the batch."""
     return ~torch.isfinite(env.state.root_pos).all(dim=-1)
+
+
+def left_field_grid(env: TraversalEnv) -> torch.Tensor:
+    """A query link more than ``field_grid_margin`` outside its scene's field grid (sideways or above): the
+    robot has left the scene, and the field there would be a clamped border value, not the field."""
+    return env.field.outside > env.cfg.terminations.field_grid_margin

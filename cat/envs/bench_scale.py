@@ -1,0 +1,171 @@
+"""``scripts/bench.py scale``: a paper-scale scene set — 355 scenes of the three kinds × 12 goals — in one field
+bank: its memory (float16 and float32), load time, the 4096-env × 13-link query, and env steps/s at 1024 envs
+against the flat task in the same run.
+
+Scenes repeat to reach the count (a few unique ones are generated once into ``--data``), but every scene of
+the set has its own storage in the bank, so memory and the query's memory traffic are those of the full set.
+Each scene gets 12 goal fields (a scene with fewer reachable goals repeats them; typical scenes get goals
+across the far end). The env measurement uses the bank of the whole set for fields, observations, rewards and
+episode sampling; the physics worlds hold no obstacles (every world would otherwise contain all 355 scenes'
+geoms: per-world scene models are the next step), so ``ratio`` is the cost of the scene set minus its physics.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from cat.envs.bench import env_rate
+from cat.envs.config import EnvCfg
+from cat.envs.scene_set import SceneSet
+from cat.envs.traversal_env import TraversalEnv
+from cat.fields import FieldBank, FieldCfg, Grid, SceneFields, SceneLayout, StaleFieldError, bank_bytes, build_fields
+from cat.fields.store import STORE_FILE
+from cat.terrain import Scene, make_indoor, make_procedural, make_typical
+
+log = logging.getLogger(__name__)
+GOALS = 12
+UNIQUE = {"typical": 2, "procedural": 2, "indoor": 2}
+
+
+def _with_goals(scene: Scene, n: int) -> Scene:
+    """The scene with exactly ``n`` goals: typical ones across the far end, others cycled."""
+    if scene.kind in ("procedural", "indoor"):
+        scene.goals = np.resize(scene.goals, (n, 3))
+    else:
+        g = scene.goals[0]
+        scene.goals = np.c_[np.full(n, g[0]), np.linspace(-0.6, 0.6, n), np.full(n, g[2])]
+    return scene
+
+
+def unique_scenes(data: Path, dtype: str) -> dict[str, list[Path]]:
+    """Scene folders (with ``fields/humanoid_pf.npz`` in ``dtype``) of the unique scenes, made once."""
+    makers = {
+        "typical": lambda i: make_typical(["hurdle-crouch", "side-pass"][i % 2], 0.5, i),
+        "procedural": lambda i: make_procedural([0.4, 0.9][i % 2], 100 + i),
+        "indoor": lambda i: make_indoor(200 + i),
+    }
+    out: dict[str, list[Path]] = {}
+    for kind, count in UNIQUE.items():
+        out[kind] = []
+        for i in range(count):
+            folder = data / f"{kind}_{i}_{dtype}"
+            path = Scene.fields_dir(folder) / STORE_FILE
+            try:
+                Scene.load(folder)
+                SceneFields.check(path, FieldCfg())
+            except (OSError, ValueError, StaleFieldError):
+                scene = _with_goals(makers[kind](i), GOALS)
+                scene.save(folder)
+                g = scene.grid()
+                fields = build_fields(scene.occupancy(), Grid(g.origin, g.voxel, g.shape), scene.goals)
+                Scene.fields_dir(folder).mkdir(exist_ok=True)
+                SceneFields.from_fields(fields).save(path, dtype)
+            out[kind].append(folder)
+    return out
+
+
+def scene_list(folders: dict[str, list[Path]], counts: dict[str, int]) -> list[Path]:
+    """``counts[kind]`` scenes of each kind, cycling through that kind's unique folders."""
+    return [folders[k][i % len(folders[k])] for k, n in counts.items() for i in range(n)]
+
+
+def query_ms(bank: FieldBank, envs: int, repeat: int, seed: int = 0) -> float:
+    """Median ms of ``bank.query`` for ``envs`` × 13 links: each env on a random field, its links within
+    ±0.35 m (±0.7 m in z) of a pelvis placed at random in the field's grid."""
+    rng = np.random.default_rng(seed)
+    idx = torch.as_tensor(rng.integers(0, bank.num_fields, envs), dtype=torch.int32)
+    lo, hi = bank.field_bounds(idx)
+    root = lo + torch.as_tensor(rng.uniform(0.1, 0.9, (envs, 3)), dtype=torch.float32) * (hi - lo)
+    root[:, 2] = 0.75
+    off = torch.as_tensor(rng.uniform(-0.35, 0.35, (envs, 13, 3)), dtype=torch.float32) * torch.tensor([1, 1, 2.0])
+    pts = root[:, None] + off
+    out = bank.query(idx, pts)
+    times = []
+    for _ in range(repeat):
+        t = time.perf_counter()
+        bank.query(idx, pts, out)
+        times.append(time.perf_counter() - t)
+    return 1e3 * float(np.median(times))
+
+
+class _FieldsOnly(SceneSet):
+    """The scene set without obstacle geoms in the physics (see the module docstring)."""
+
+    def add_to_spec(self, spec) -> None:
+        return None
+
+
+def main(argv: list[str] | None = None) -> None:
+    p = argparse.ArgumentParser(prog="bench.py scale", description=__doc__)
+    p.add_argument("--typical", type=int, default=80)
+    p.add_argument("--procedural", type=int, default=167)
+    p.add_argument("--indoor", type=int, default=108)
+    p.add_argument("--dtype", default="float16", choices=["float16", "float32"])
+    p.add_argument("--data", default="/tmp/cat_scale_bench", help="where the unique scenes are cached")
+    p.add_argument("--envs", type=int, default=1024, help="envs for the env steps/s comparison")
+    p.add_argument("--query-envs", type=int, default=4096)
+    p.add_argument("--seconds", type=float, default=12.0, help="per env, split over --rounds interleaved runs")
+    p.add_argument("--rounds", type=int, default=4)
+    p.add_argument("--repeat", type=int, default=21)
+    p.add_argument("--mem-limit-gb", type=float, default=None, help="refuse a bank above this (default: RAM - 4 GB)")
+    args = p.parse_args(argv)
+    logging.basicConfig(level=logging.WARNING)
+    import warp as wp
+
+    wp.config.log_level = wp.LOG_WARNING  # keep stdout to result lines
+
+    counts = {"typical": args.typical, "procedural": args.procedural, "indoor": args.indoor}
+    folders = scene_list(unique_scenes(Path(args.data), args.dtype), counts)
+    scenes_u = {f: Scene.load(f) for f in set(folders)}
+    layouts = []
+    for f in folders:
+        g = scenes_u[f].grid()
+        layouts.append(SceneLayout(Grid(g.origin, g.voxel, g.shape), len(scenes_u[f].goals)))
+    mb = {d: bank_bytes(layouts, d) / 2**20 for d in ("float16", "float32")}
+    print(
+        f"case=scale_memory scenes={len(folders)} goals={GOALS} fp16_mb={mb['float16']:.0f} fp32_mb={mb['float32']:.0f}"
+        f" fits_24gib_fp16={mb['float16'] < 24 * 1024} fits_24gib_fp32={mb['float32'] < 24 * 1024}",
+        flush=True,
+    )
+    limit = args.mem_limit_gb if args.mem_limit_gb is not None else _mem_available_gb() - 4.0
+    if mb[args.dtype] / 1024 > limit:
+        raise SystemExit(f"bank of {mb[args.dtype] / 1024:.1f} GB exceeds --mem-limit-gb {limit:.1f}")
+
+    torch.set_num_threads(1)
+
+    def load(i: int) -> SceneFields:  # every entry reads its file, as a set of distinct scenes would
+        return SceneFields.load(Scene.fields_dir(folders[i]) / STORE_FILE, FieldCfg())
+
+    t = time.perf_counter()
+    sset = _FieldsOnly([scenes_u[f] for f in folders], load, args.envs, dtype=args.dtype)
+    load_s = time.perf_counter() - t
+    q = query_ms(sset.bank, args.query_envs, args.repeat)
+    env = TraversalEnv(EnvCfg(num_envs=args.envs), sim="mujoco", scenes=sset, seed=0)
+    flat = TraversalEnv(EnvCfg(num_envs=args.envs), sim="mujoco", seed=0)
+    rates: dict[str, list[float]] = {"set": [], "flat": []}
+    for _ in range(args.rounds):  # interleaved: both see the same machine load
+        rates["set"].append(env_rate(env, args.seconds / args.rounds))
+        rates["flat"].append(env_rate(flat, args.seconds / args.rounds))
+    rate, flat_rate = (float(np.median(rates[k])) for k in ("set", "flat"))
+    print(
+        f"case=scale scenes={len(folders)} goals={GOALS} bank_mb={sset.bank.nbytes / 2**20:.0f} load_s={load_s:.1f}"
+        f" query_ms={q:.2f} env_steps_per_s={rate:.0f} flat_env_steps_per_s={flat_rate:.0f}"
+        f" ratio={rate / flat_rate:.2f}",
+        flush=True,
+    )
+
+
+def _mem_available_gb() -> float:
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                return int(line.split()[1]) / 2**20
+    except OSError:
+        pass
+    return float("inf")

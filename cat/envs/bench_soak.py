@@ -1,0 +1,132 @@
+"""``scripts/bench.py soak steps=<n>``: random actions through every scene kind; counts non-finite observations
+and rewards and the episode resets by cause.
+
+Scenes: the eight typical types, two procedural and two indoor scenes (cached in ``--data``), tiled in one
+model as ``SceneSet`` does today. Actions are uniform in [-1, 1], pushes on. Reward terms are counted *before*
+the env's ``nan_to_num`` (the term functions are wrapped for the run), so a non-finite value cannot hide;
+termination terms are wrapped the same way to attribute each reset to its cause(s).
+Prints ``case=soak steps=<n> nonfinite=<k> resets=<r> by_cause=<cause:count,...>``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import logging
+import time
+from collections import Counter
+from pathlib import Path
+
+import torch
+
+from cat.envs.config import EnvCfg, PushCfg
+from cat.envs.mdp import rewards as rew_terms
+from cat.envs.mdp import terminations as term_terms
+from cat.envs.scene_set import SceneSet
+from cat.envs.traversal_env import TraversalEnv
+from cat.fields import FieldCfg, Grid, SceneFields, StaleFieldError, build_fields
+from cat.fields.store import STORE_FILE
+from cat.terrain import TYPICAL_KINDS, Scene, make_indoor, make_procedural, make_typical
+
+log = logging.getLogger(__name__)
+
+
+def soak_scenes(data: Path) -> tuple[list[Scene], list[Path]]:
+    """Every scene kind (8 typical, 2 procedural, 2 indoor), generated with fields once into ``data``."""
+    makers = [(f"typical_{k}", functools.partial(make_typical, k, 0.5, 0)) for k in TYPICAL_KINDS]
+    makers += [(f"procedural_{i}", functools.partial(make_procedural, d, 300 + i)) for i, d in enumerate((0.3, 0.9))]
+    makers += [(f"indoor_{i}", functools.partial(make_indoor, 400 + i)) for i in range(2)]
+    scenes, folders = [], []
+    for name, make in makers:
+        folder = data / name
+        try:
+            scene = Scene.load(folder)
+            SceneFields.check(Scene.fields_dir(folder) / STORE_FILE, FieldCfg())
+        except (OSError, ValueError, StaleFieldError):
+            scene = make()
+            scene.save(folder)
+            g = scene.grid()
+            fields = build_fields(scene.occupancy(), Grid(g.origin, g.voxel, g.shape), scene.goals)
+            Scene.fields_dir(folder).mkdir(exist_ok=True)
+            SceneFields.from_fields(fields).save(Scene.fields_dir(folder) / STORE_FILE)
+        scenes.append(scene)
+        folders.append(folder)
+    return scenes, folders
+
+
+class _Recorder:
+    """Wraps term functions of a module for the run: last termination flags, non-finite reward counts."""
+
+    def __init__(self, module, names: list[str], kind: str):
+        self.module, self.kind = module, kind
+        self.saved = {n: getattr(module, n) for n in names}
+        self.last: dict[str, torch.Tensor] = {}
+        self.nonfinite = 0
+
+    def __enter__(self) -> _Recorder:
+        for name, fn in self.saved.items():
+            setattr(self.module, name, self._wrap(name, fn))
+        return self
+
+    def __exit__(self, *exc) -> None:
+        for name, fn in self.saved.items():
+            setattr(self.module, name, fn)
+
+    def _wrap(self, name, fn):
+        def wrapped(env):
+            value = fn(env)
+            if self.kind == "termination":
+                self.last[name] = value.clone()
+            else:
+                self.nonfinite += int((~torch.isfinite(value)).sum())
+            return value
+
+        return wrapped
+
+
+def main(argv: list[str] | None = None) -> None:
+    p = argparse.ArgumentParser(prog="bench.py soak", description=__doc__)
+    p.add_argument("steps", nargs="?", default="steps=200000", help="steps=<n>: env steps in total")
+    p.add_argument("--envs", type=int, default=256)
+    p.add_argument("--data", default="/tmp/cat_soak_bench")
+    p.add_argument("--seed", type=int, default=0)
+    args = p.parse_args(argv)
+    if not args.steps.startswith("steps="):
+        raise SystemExit(f"expected steps=<n>, got {args.steps!r}")
+    total = int(float(args.steps.split("=", 1)[1]))
+    logging.basicConfig(level=logging.WARNING)
+    import warp as wp
+
+    wp.config.log_level = wp.LOG_WARNING  # keep stdout to result lines
+
+    scenes, folders = soak_scenes(Path(args.data))
+    sset = SceneSet(scenes, lambda i: SceneFields.load(Scene.fields_dir(folders[i]) / STORE_FILE), args.envs)
+    cfg = EnvCfg(num_envs=args.envs, push=PushCfg(enabled=True))
+    env = TraversalEnv(cfg, sim="mujoco", scenes=sset, seed=args.seed)
+    gen = torch.Generator().manual_seed(args.seed)
+    causes: Counter = Counter()
+    nonfinite_obs, resets, steps = 0, 0, 0
+    rew_names = list(env.reward_names)
+    t0 = time.perf_counter()
+    with (
+        _Recorder(term_terms, list(cfg.terminations.terms), "termination") as term,
+        _Recorder(rew_terms, rew_names, "reward") as rew,
+    ):
+        while steps < total:
+            obs, reward, done, extras = env.step(2 * torch.rand(args.envs, env.num_actions, generator=gen) - 1)
+            steps += args.envs
+            nonfinite_obs += sum(int((~torch.isfinite(v)).sum()) for v in obs.values())
+            rew.nonfinite += int((~torch.isfinite(reward)).sum())
+            ids = done.nonzero().flatten()
+            resets += len(ids)
+            for i in ids.tolist():
+                named = [n for n, flags in term.last.items() if bool(flags[i])]
+                causes.update(named or ["time_out"])
+    by_cause = ",".join(f"{k}:{v}" for k, v in sorted(causes.items()))
+    print(
+        f"case=soak steps={steps} nonfinite={nonfinite_obs + rew.nonfinite} resets={resets} by_cause={by_cause}"
+        f" envs={args.envs} seconds={time.perf_counter() - t0:.0f}",
+        flush=True,
+    )
+    if nonfinite_obs + rew.nonfinite:
+        log.warning("non-finite: %d in observations, %d in rewards", nonfinite_obs, rew.nonfinite)

@@ -1,0 +1,114 @@
+# ruff: noqa: UP018  (Warp kernels need int(0)/float(0.0) to declare mutable locals)
+"""Warp kernel of the field-bank query: trilinear d, ∇d (stored once per scene) and F (stored per goal).
+
+Storage is two flat buffers. A scene's block (``vec4``: d, ∇d) and a field's block (``vec3``: F) are found
+from the buffer's 64-bit base address plus an int64 element offset (:func:`block_address`); inside a block
+the index is at most one grid's voxel count. No index therefore wraps however many voxels the bank holds
+(a single flat int32 index wraps past 2^31 voxels, ≈ 3,400 fields of 125×125×40).
+"""
+
+from __future__ import annotations
+
+import functools
+
+import warp as wp
+
+vec7 = wp.types.vector(length=7, dtype=wp.float32)
+"""Query output per point: F (3), d, ∇d (3)."""
+
+
+@wp.func
+def block_address(ptr: wp.uint64, offset: wp.int64, elem_bytes: wp.int64) -> wp.uint64:
+    """Address of element ``offset`` of a buffer starting at ``ptr`` (exact 64-bit arithmetic)."""
+    return ptr + wp.uint64(offset) * wp.uint64(elem_bytes)
+
+
+@wp.kernel
+def block_address_kernel(
+    ptr: wp.uint64, offsets: wp.array(dtype=wp.int64), elem_bytes: wp.int64, out: wp.array(dtype=wp.uint64)
+):
+    """``out[i] = block_address(ptr, offsets[i], elem_bytes)`` (tests the arithmetic without memory reads)."""
+    i = wp.tid()
+    out[i] = block_address(ptr, offsets[i], elem_bytes)
+
+
+@functools.cache
+def query_kernel(scalar: type) -> wp.Kernel:
+    """The bank query for storage scalar type ``scalar`` (``wp.float32`` or ``wp.float16``); math in float32."""
+    v4 = wp.types.vector(length=4, dtype=scalar)
+    v3 = wp.types.vector(length=3, dtype=scalar)
+    scene_bytes = wp.types.type_size_in_bytes(v4)
+    goal_bytes = wp.types.type_size_in_bytes(v3)
+
+    @wp.kernel(module="unique")
+    def query(
+        scene_ptr: wp.uint64,
+        goal_ptr: wp.uint64,
+        scene_offset: wp.array(dtype=wp.int64),
+        scene_shape: wp.array(dtype=wp.vec3i),
+        scene_origin: wp.array(dtype=wp.vec3),
+        scene_inv_voxel: wp.array(dtype=wp.float32),
+        field_scene: wp.array(dtype=wp.int32),
+        field_offset: wp.array(dtype=wp.int64),
+        field_idx: wp.array(dtype=wp.int32),
+        points: wp.array(dtype=wp.vec3),
+        links: int,
+        out: wp.array(dtype=vec7),
+        inside: wp.array(dtype=wp.bool),
+    ):
+        """One thread per (env, link): trilinear interpolation of F, d and ∇d at ``points[t]``."""
+        t = wp.tid()
+        f = field_idx[t / links]
+        s = field_scene[f]
+        shp = scene_shape[s]
+        nx = shp[0]
+        ny = shp[1]
+        nz = shp[2]
+        n = nx * ny * nz
+        sd = wp.array(
+            ptr=block_address(scene_ptr, scene_offset[s], wp.int64(wp.static(scene_bytes))), shape=(n,), dtype=v4
+        )
+        fd = wp.array(
+            ptr=block_address(goal_ptr, field_offset[f], wp.int64(wp.static(goal_bytes))), shape=(n,), dtype=v3
+        )
+        u = (points[t] - scene_origin[s]) * scene_inv_voxel[s]
+        if not (wp.isfinite(u[0]) and wp.isfinite(u[1]) and wp.isfinite(u[2])):
+            u = wp.vec3(-1.0, -1.0, -1.0)  # NaN/inf point: grid corner value, inside = False
+        inside[t] = (
+            u[0] >= 0.0
+            and u[1] >= 0.0
+            and u[2] >= 0.0
+            and u[0] <= float(nx)
+            and u[1] <= float(ny)
+            and u[2] <= float(nz)
+        )
+        # continuous index of voxel centres, clamped to the grid's centre span ("clamp to edge")
+        cx = wp.clamp(u[0] - 0.5, 0.0, float(nx - 1))
+        cy = wp.clamp(u[1] - 0.5, 0.0, float(ny - 1))
+        cz = wp.clamp(u[2] - 0.5, 0.0, float(nz - 1))
+        i0 = wp.min(int(cx), wp.max(nx - 2, 0))
+        j0 = wp.min(int(cy), wp.max(ny - 2, 0))
+        k0 = wp.min(int(cz), wp.max(nz - 2, 0))
+        fx = cx - float(i0)
+        fy = cy - float(j0)
+        fz = cz - float(k0)
+        gx = 1.0 - fx
+        gy = 1.0 - fy
+        gz = 1.0 - fz
+        o1 = wp.where(nx > 1, ny * nz, 0)
+        o2 = wp.where(ny > 1, nz, 0)
+        o3 = wp.where(nz > 1, 1, 0)
+        b = (i0 * ny + j0) * nz + k0
+        s00 = gz * wp.vec4(sd[b]) + fz * wp.vec4(sd[b + o3])
+        s01 = gz * wp.vec4(sd[b + o2]) + fz * wp.vec4(sd[b + o2 + o3])
+        s10 = gz * wp.vec4(sd[b + o1]) + fz * wp.vec4(sd[b + o1 + o3])
+        s11 = gz * wp.vec4(sd[b + o1 + o2]) + fz * wp.vec4(sd[b + o1 + o2 + o3])
+        sv = gx * (gy * s00 + fy * s01) + fx * (gy * s10 + fy * s11)
+        f00 = gz * wp.vec3(fd[b]) + fz * wp.vec3(fd[b + o3])
+        f01 = gz * wp.vec3(fd[b + o2]) + fz * wp.vec3(fd[b + o2 + o3])
+        f10 = gz * wp.vec3(fd[b + o1]) + fz * wp.vec3(fd[b + o1 + o3])
+        f11 = gz * wp.vec3(fd[b + o1 + o2]) + fz * wp.vec3(fd[b + o1 + o2 + o3])
+        fv = gx * (gy * f00 + fy * f01) + fx * (gy * f10 + fy * f11)
+        out[t] = vec7(fv[0], fv[1], fv[2], sv[0], sv[1], sv[2], sv[3])
+
+    return query

@@ -218,7 +218,7 @@ def test_bad_input_names_the_problem_and_writes_nothing(tmp_path, checkpoints, s
     with pytest.raises(ManifestError, match="manifest not found"):
         evaluate(EvalTableCfg(manifest=str(tmp_path / "none.yaml"), out=str(tmp_path / "o")))
     code, err = _run_script(["manifest=x.yaml", "outt=y"], caplog)
-    assert code == 2 and "bad argument 'outt=y'" in err
+    assert code == 2 and "unknown key 'outt'; did you mean out?" in err
 
 
 def test_failure_during_evaluation_leaves_no_output(tmp_path, monkeypatch, caplog, scene_dirs):

@@ -1,11 +1,12 @@
 """Scene-occupancy perception for the baselines: robot-centric elevation maps and voxel grids, per env per step.
 
-At construction every scene of the env's ``SceneSet`` is reduced once to a ground and an overhead height map
-and a pooled occupancy grid (``cat.terrain.elevation``), shifted to its tile in the shared world frame and
-packed into flat tensors. Each step a fixed grid of sample points in the yaw frame is rotated by each env's
-yaw, placed at its root and read by nearest-cell gathers into its own scene's arrays: one batched torch
-gather, no per-env Python. Points outside a scene's grid read free space (floor 0, no overhead, empty). With no
-scenes (flat task) the maps are constant: the floor and the overhead cap.
+On first use every scene of the env's ``SceneSet`` is reduced once to a table of columns: per xy voxel of its
+grid the ground and overhead heights (``cat.terrain.elevation``), or the pooled occupancy at the voxel grid's
+height levels; tables are shifted to their tiles in the shared world frame and packed into one tensor. Each
+step a fixed grid of sample points in the yaw frame is rotated by each env's yaw, placed at its root and read
+by one nearest-column gather into its own scene's table: batched torch ops, no per-env Python. Points outside
+a scene's grid read free space (floor 0, no overhead, empty). With no scenes (flat task) the maps are constant:
+the floor and the overhead cap.
 """
 
 from __future__ import annotations
@@ -53,30 +54,34 @@ def voxel_points(cfg: VoxelGridCfg) -> torch.Tensor:
     return torch.tensor(np.stack(np.meshgrid(xs, ys, zs, indexing="ij"), -1).reshape(-1, 3), dtype=torch.float32)
 
 
-class _Packed:
-    """Per-scene grids concatenated into one flat tensor, with each scene's origin, voxel, shape and offset."""
+class _Columns:
+    """Per-scene column tables (X, Y, C), each framed by a one-cell border of the free-space ``default`` and packed
+    into one (rows, C) tensor. A query is one 2-D index computation per point, clamped into its scene's frame
+    (points outside the grid land on the border), and one row gather of all C channels (both map layers, or every
+    height level of the voxel grid)."""
 
-    def __init__(self, arrays: list[np.ndarray], origins: list[np.ndarray], voxels: list[float], device, dtype):
-        self.ndim = arrays[0].ndim
-        self.flat = torch.cat([torch.as_tensor(a.reshape(-1), dtype=dtype) for a in arrays]).to(device)
-        sizes = [a.size for a in arrays]
+    def __init__(self, tables: list[np.ndarray], origins: list[np.ndarray], voxels: list[float], default, device):
+        dflt = np.asarray(default, dtype=tables[0].dtype)
+        framed = []
+        for t in tables:
+            f = np.empty((t.shape[0] + 2, t.shape[1] + 2, t.shape[2]), dtype=t.dtype)
+            f[:] = dflt
+            f[1:-1, 1:-1] = t
+            framed.append(f)
+        self.table = torch.cat([torch.as_tensor(f.reshape(-1, f.shape[-1])) for f in framed]).to(device)
+        sizes = [f.shape[0] * f.shape[1] for f in framed]
         self.base = torch.tensor(np.concatenate(([0], np.cumsum(sizes)[:-1])), dtype=torch.long, device=device)
-        self.shape = torch.tensor([a.shape for a in arrays], dtype=torch.long, device=device)
-        self.origin = torch.tensor(np.stack(origins)[:, : self.ndim], dtype=torch.float32, device=device)
+        self.last = torch.tensor([f.shape[:2] for f in framed], dtype=torch.long, device=device) - 1
+        self.origin = torch.tensor(np.stack(origins)[:, :2], dtype=torch.float32, device=device)
         self.inv_voxel = torch.tensor([1.0 / v for v in voxels], dtype=torch.float32, device=device)
 
-    def gather(self, scene: torch.Tensor, points: torch.Tensor, default: float) -> torch.Tensor:
-        """Values (N, P) at world ``points`` (N, P, ndim) of env scenes ``scene`` (N,); ``default`` outside."""
-        idx = torch.floor((points - self.origin[scene][:, None]) * self.inv_voxel[scene][:, None, None]).long()
-        shape = self.shape[scene][:, None]
-        inside = ((idx >= 0) & (idx < shape)).all(dim=-1)
-        flat = self.base[scene][:, None].expand(idx.shape[:2]).clone()
-        stride = torch.ones_like(shape[..., 0])
-        for d in reversed(range(self.ndim)):
-            flat += idx[..., d] * stride
-            stride = stride * shape[..., d]
-        values = self.flat[flat.clamp(0, self.flat.numel() - 1)].to(torch.float32)
-        return torch.where(inside, values, torch.full_like(values, default))
+    def gather(self, scene: torch.Tensor, xy: torch.Tensor) -> torch.Tensor:
+        """Rows (N, P, C) at world points ``xy`` (N, P, 2) of env scenes ``scene`` (N,)."""
+        u = (xy - self.origin[scene][:, None]) * self.inv_voxel[scene][:, None, None] + 1.0  # index in the frame
+        last = self.last[scene][:, None]
+        idx = torch.minimum(u.long().clamp_(min=0), last)  # truncation = floor for u >= 0; u < 0 -> border 0
+        row = self.base[scene][:, None] + idx[..., 0] * (last[..., 1] + 1) + idx[..., 1]
+        return self.table.index_select(0, row.reshape(-1)).reshape(*row.shape, -1)
 
 
 class ScenePerception:
@@ -84,10 +89,12 @@ class ScenePerception:
 
     def __init__(self, cfg: PerceptionCfg, scenes: SceneSet | None, device):
         self.cfg, self.scenes, self.device = cfg, scenes, torch.device(device)
-        self._maps: tuple[_Packed, _Packed] | None = None
-        self._voxels: _Packed | None = None
+        self._maps: _Columns | None = None
+        self._voxels: _Columns | None = None
         self.map_points = map_points(cfg.height_map).to(self.device)
         self.voxel_points = voxel_points(cfg.voxel_grid).to(self.device)
+        n = voxel_shape(cfg.voxel_grid)
+        self.voxel_columns = self.voxel_points.reshape(n[0] * n[1], n[2], 3)[:, 0, :2].contiguous()
 
     # --- precomputation (once per scene) --------------------------------------------------------------------
     def _scene_grids(self):
@@ -95,23 +102,28 @@ class ScenePerception:
             grid = scene.grid()
             yield scene.occupancy(), grid, np.asarray(grid.origin) + offset
 
-    def _build_maps(self) -> tuple[_Packed, _Packed]:
+    def _build_maps(self) -> _Columns:
         hm = self.cfg.height_map
-        ground, over, origins, voxels = [], [], [], []
+        tables, origins, voxels = [], [], []
         for occ, grid, origin in self._scene_grids():
             pool = pool_voxels(hm.resolution, grid.voxel)
-            g, o = elevation_layers(occ, grid, hm.split_height, hm.overhead_cap, pool)
-            ground.append(g), over.append(o), origins.append(origin), voxels.append(grid.voxel)
-        dev = self.device
-        return _Packed(ground, origins, voxels, dev, torch.float32), _Packed(over, origins, voxels, dev, torch.float32)
+            ground, over = elevation_layers(occ, grid, hm.split_height, hm.overhead_cap, pool)
+            tables.append(np.stack((ground, over), axis=-1)), origins.append(origin), voxels.append(grid.voxel)
+        return _Columns(tables, origins, voxels, [0.0, hm.overhead_cap], self.device)
 
-    def _build_voxels(self) -> _Packed:
-        res = self.cfg.voxel_grid.resolution
-        occs, origins, voxels = [], [], []
+    def _build_voxels(self) -> _Columns:
+        """Per scene, the pooled occupancy at the grid's height levels (X, Y, levels): a column per xy cell."""
+        vg = self.cfg.voxel_grid
+        zs = self.voxel_points[: voxel_shape(vg)[2], 2].cpu().numpy()
+        tables, origins, voxels = [], [], []
         for occ, grid, origin in self._scene_grids():
-            occs.append(pooled_occupancy(occ, pool_voxels(res, grid.voxel)))
-            origins.append(origin), voxels.append(grid.voxel)
-        return _Packed(occs, origins, voxels, self.device, torch.uint8)
+            pooled = pooled_occupancy(occ, pool_voxels(vg.resolution, grid.voxel))
+            iz = np.floor((zs - grid.origin[2]) / grid.voxel).astype(int)
+            valid = (iz >= 0) & (iz < occ.shape[2])
+            table = np.zeros((*occ.shape[:2], len(zs)), dtype=np.uint8)
+            table[..., valid] = pooled[..., iz[valid]]
+            tables.append(table), origins.append(origin), voxels.append(grid.voxel)
+        return _Columns(tables, origins, voxels, np.zeros(len(zs)), self.device)
 
     # --- queries ---------------------------------------------------------------------------------------------
     def _scene_of_env(self, n: int) -> torch.Tensor:
@@ -119,30 +131,29 @@ class ScenePerception:
 
     def layers_at(self, xy: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(ground, overhead) heights (N, P) at world points ``xy`` (N, P, 2), each env in its own scene."""
-        cap = self.cfg.height_map.overhead_cap
         if self.scenes is None:
             shape = xy.shape[:-1]
-            return torch.zeros(shape, device=xy.device), torch.full(shape, cap, device=xy.device)
+            return torch.zeros(shape, device=xy.device), torch.full(
+                shape, self.cfg.height_map.overhead_cap, device=xy.device
+            )
         if self._maps is None:
             self._maps = self._build_maps()
-        scene = self._scene_of_env(xy.shape[0])
-        ground, over = self._maps
-        return ground.gather(scene, xy, 0.0), over.gather(scene, xy, cap)
+        both = self._maps.gather(self._scene_of_env(xy.shape[0]), xy)
+        return both[..., 0], both[..., 1]
 
     def elevation(self, root_pos: torch.Tensor, yaw: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(ground, overhead) (N, P) on the robot-centric map grid of each env."""
         return self.layers_at(_to_world(self.map_points, root_pos, yaw))
 
     def voxels(self, root_pos: torch.Tensor, yaw: torch.Tensor) -> torch.Tensor:
-        """Occupancy (N, P) in {0, 1} at the robot-centric voxel grid cells of each env."""
-        pts = self.voxel_points
+        """Occupancy (N, P) in {0, 1} at the robot-centric voxel grid cells of each env, row-major (x, y, z)."""
+        n = root_pos.shape[0]
         if self.scenes is None:
-            return torch.zeros(root_pos.shape[0], pts.shape[0], device=root_pos.device)
+            return torch.zeros(n, self.voxel_points.shape[0], device=root_pos.device)
         if self._voxels is None:
             self._voxels = self._build_voxels()
-        xy = _to_world(pts[:, :2], root_pos, yaw)
-        xyz = torch.cat((xy, pts[:, 2].expand(xy.shape[:2]).unsqueeze(-1)), dim=-1)
-        return self._voxels.gather(self._scene_of_env(root_pos.shape[0]), xyz, 0.0)
+        xy = _to_world(self.voxel_columns, root_pos, yaw)
+        return self._voxels.gather(self._scene_of_env(n), xy).reshape(n, -1).to(torch.float32)
 
 
 def _to_world(local_xy: torch.Tensor, root_pos: torch.Tensor, yaw: torch.Tensor) -> torch.Tensor:

@@ -63,6 +63,7 @@ def test_which_rewards_read_humanoidpf(method):
             force=torch.randn(*shape, 3, generator=gen),
             sdf=0.3 * torch.rand(*shape, generator=gen) - 0.1,
             grad_sdf=torch.randn(*shape, 3, generator=gen),
+            outside=torch.zeros(shape[0]),
         )
 
     env.field_source.sample = random_field

@@ -1,6 +1,6 @@
 """Train a PPO policy: ``python scripts/train.py task=flat sim=mujoco num_envs=16 max_iterations=2``.
 
-Keys are hydra overrides of ``configs/train.yaml``: task=, sim=, algo=, num_envs=, max_iterations=,
+Keys are hydra overrides of ``configs/train.yaml``: task=, sim=, algo=, method=, num_envs=, max_iterations=,
 max_minutes=, seed=, init=<checkpoint>, resume=<checkpoint>, run_root= / run_name= / run_dir=, and any task.* /
 algo.* field. ``resume=`` continues that run with its own config; other keys given change only themselves.
 """
@@ -32,7 +32,7 @@ SCRIPT = Script(
     load=_load,
     job=_job,
     run_dir_key="run_dir",
-    groups={g: _options(g) for g in ("task", "sim", "algo")},
+    groups={g: _options(g) for g in ("task", "sim", "algo", "method")},
     keys=["num_envs", "max_iterations", "max_minutes", "seed", "init", "resume", "run_name", "verbose"],
     errors=(CheckpointError, ValueError),
 )

@@ -104,7 +104,7 @@ def test_pushes_kick_the_root_by_the_configured_speed():
 
 def test_unknown_term_names_are_rejected():
     cfg = EnvCfg(num_envs=2)
-    cfg.observations.actor.append("elevation_mapp")
+    cfg.observations["actor"].terms.append("elevation_mapp")
     with pytest.raises(ValueError, match="unknown observation term 'elevation_mapp'; valid: .*field_block"):
         TraversalEnv(cfg)
     cfg = EnvCfg(num_envs=2)

@@ -187,7 +187,7 @@ def _broken_layout(checkpoint: Path, tmp_path: Path) -> Path:
     run = tmp_path / "edited_run"
     shutil.copytree(checkpoint.parent, run)
     cfg = yaml.safe_load((run / "config.yaml").read_text())
-    cfg["task"]["observations"]["actor"].remove("gait_phase")
+    cfg["task"]["observations"]["actor"]["terms"].remove("gait_phase")
     (run / "config.yaml").write_text(yaml.safe_dump(cfg))
     return run / checkpoint.name
 

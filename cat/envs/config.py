@@ -18,43 +18,98 @@ class CommandCfg:
     speed: float = 0.9  # commanded root speed along the field [m/s]: 2 m in ~2.5 s, well inside the 5 s trial
     slow_radius: float = 0.4  # inside this goal distance the speed decays as (d/slow_radius)^slow_power [m]
     slow_power: float = 1.0  # 1 = linear: arrives (0.4 m -> 0.1 m in ~0.6 s); 3 (the release) never gets within 0.1 m
+    # direction of the command (cat.envs.mdp.commands.COMMAND_SOURCES): "field" = along F_H at the root (ours);
+    # "straight" = the straight line to the goal (the baselines: no reward reads HumanoidPF)
+    source: str = "field"
 
 
 @dataclass
 class FieldObsCfg:
     """How HumanoidPF enters the observation (paper eq. OBS_field)."""
 
-    enabled: bool = True  # False = the "w/o OBS_field" ablation (field block zeroed)
+    enabled: bool = True  # False: the field block reads zeros (the paper's w/o OBS_field is method=wo_obs_field)
     refresh_hz: float = 10.0  # field block refresh rate, mimics 10 Hz odometry / mapping
     sdf_clip: float = 1.0  # SDF values are clipped to [-sdf_clip, sdf_clip] in the observation [m]
 
 
-@dataclass
-class ObsCfg:
-    """Observation terms (functions of ``cat.envs.mdp.observations``) per group, in order."""
+ACTOR_TERMS = (
+    "gyro",
+    "projected_gravity",
+    "joint_pos",
+    "joint_vel",
+    "last_action",
+    "leg_targets",
+    "goal_command",
+    "gait_phase",
+    "field_block",
+)
+PRIVILEGED_TERMS = ("base_lin_vel", "base_height", "link_positions", "foot_contacts", "dr_scales")
 
-    actor: list[str] = field(
-        default_factory=lambda: [
-            "gyro",
-            "projected_gravity",
-            "joint_pos",
-            "joint_vel",
-            "last_action",
-            "leg_targets",
-            "goal_command",
-            "gait_phase",
-            "field_block",
-        ]
-    )
-    # the critic sees the actor terms without noise, plus these
-    privileged: list[str] = field(
-        default_factory=lambda: ["base_lin_vel", "base_height", "link_positions", "foot_contacts", "dr_scales"]
-    )
+
+@dataclass
+class ObsGroupCfg:
+    """One named observation group: terms of ``cat.envs.mdp.observations``, concatenated in order.
+
+    ``extends`` names another group whose (resolved) terms come first, so a critic or teacher follows its actor
+    when a method swaps an actor term. ``noise`` adds ``NoiseCfg``'s per-term noise (when ``noise.enabled``).
+    """
+
+    terms: list[str] = field(default_factory=list)
+    extends: str = ""
+    noise: bool = False
+
+
+def default_obs_groups() -> dict[str, ObsGroupCfg]:
+    """``actor`` (deployable, noisy) and ``critic`` (the actor terms without noise + privileged state)."""
+    return {
+        "actor": ObsGroupCfg(terms=list(ACTOR_TERMS), noise=True),
+        "critic": ObsGroupCfg(terms=list(PRIVILEGED_TERMS), extends="actor"),
+    }
+
+
+@dataclass
+class HeightMapCfg:
+    """Robot-centric two-layer elevation map (``elevation_map``, ``ground_map``, ``overhead_map`` terms).
+
+    Cells on a yaw-aligned grid around the root; the ground layer is the top of the obstacles under each cell
+    (the floor, 0, where there are none), the overhead layer the underside of the obstacles above it
+    (``overhead_cap`` where there are none). Heights are world z (the floor is z = 0). See docs/baselines.md.
+    """
+
+    length: float = 1.6  # extent along the heading [m]
+    width: float = 1.2  # lateral extent, symmetric about the root (so the map mirrors cell to cell) [m]
+    resolution: float = 0.1  # cell spacing [m]
+    forward_offset: float = 0.3  # map centre ahead of the root: it looks where the robot walks [m]
+    split_height: float = 0.5  # an obstacle whose underside is below this is ground, otherwise overhead [m]
+    overhead_cap: float = 2.0  # overhead value where nothing is above (and the clip of the layer) [m]
+
+
+@dataclass
+class VoxelGridCfg:
+    """Robot-centric occupancy grid (``voxel_grid`` term; the Table III voxel baseline). See docs/baselines.md."""
+
+    length: float = 1.6  # extent along the heading [m]
+    width: float = 1.2  # lateral extent, symmetric about the root [m]
+    height: float = 1.6  # vertical extent from the floor [m]
+    resolution: float = 0.1  # cell size [m]
+    forward_offset: float = 0.3  # grid centre ahead of the root [m]
+
+
+@dataclass
+class PerceptionCfg:
+    """Scene-occupancy observations for the baselines (computed per env every step, in the yaw frame)."""
+
+    height_map: HeightMapCfg = field(default_factory=HeightMapCfg)
+    voxel_grid: VoxelGridCfg = field(default_factory=VoxelGridCfg)
 
 
 @dataclass
 class NoiseCfg:
-    """Uniform observation noise U(-s, s) per actor term, keyed by term name (zero or absent: no noise)."""
+    """Observation noise per term, keyed by term name (zero or absent: no noise), in groups with ``noise: true``.
+
+    Uniform U(-s, s) added to every value; for the occupancy term ``voxel_grid``, s is the probability that a
+    cell reads flipped.
+    """
 
     enabled: bool = True
     gyro: float = 0.2
@@ -62,6 +117,10 @@ class NoiseCfg:
     joint_pos: float = 0.01
     joint_vel: float = 1.5
     field_block: float = 0.05
+    elevation_map: float = 0.03  # [m] per cell, about a depth camera's error at 1-2 m
+    ground_map: float = 0.03
+    overhead_map: float = 0.03
+    voxel_grid: float = 0.02  # flip probability per cell
 
 
 @dataclass
@@ -92,7 +151,10 @@ class RewardParamsCfg:
     foot_clearance: float = 0.07  # feet_clearance: swing-foot target height [m]
     knee_min: float = 0.2  # knee_straight: penalise knee angles below this [rad]
     barrier_margin: float = 0.05  # sdf_barrier: softplus((margin - d) / width) at each query link [m]
-    barrier_width: float = 0.02  # [m]
+    barrier_width: float = 0.02  # [m]; map_clearance uses the same margin and width on the elevation map
+    # track_heading's gate (cat.envs.mdp.rewards.HEADING_GATES): "field" = free wherever a query link is within
+    # heading_clearance of an obstacle by HumanoidPF's SDF (ours); "none" = always tracked (reads no field)
+    heading_gate: str = "field"
 
 
 @dataclass
@@ -116,6 +178,7 @@ class RewardCfg:
     feet_slip: float = -0.1
     knee_straight: float = -0.1
     sdf_barrier: float = -2.0  # obstacle proximity at the 13 links (anticipatory; the release used -20 at 11 sites)
+    map_clearance: float = 0.0  # ASTraversal's obstacle avoidance: the same barrier on elevation-map clearance
     collision: float = -5.0  # per control step with robot-obstacle contact at any substep
     termination: float = -20.0
     params: RewardParamsCfg = field(default_factory=RewardParamsCfg)
@@ -152,7 +215,8 @@ class EnvCfg:
     action_clip: float = 1.0
     gait_freq: tuple[float, float] = (1.3, 1.5)  # gait clock frequency [Hz]
     command: CommandCfg = field(default_factory=CommandCfg)
-    observations: ObsCfg = field(default_factory=ObsCfg)
+    observations: dict[str, ObsGroupCfg] = field(default_factory=default_obs_groups)
+    perception: PerceptionCfg = field(default_factory=PerceptionCfg)
     field_obs: FieldObsCfg = field(default_factory=FieldObsCfg)
     noise: NoiseCfg = field(default_factory=NoiseCfg)
     domain_rand: DomainRandCfg = field(default_factory=DomainRandCfg)

@@ -8,6 +8,8 @@ term and the 12 leg actions mirror by a column permutation and a sign, so a grou
 - axial vectors (angular velocity): (-x, y, -z)
 - joints: left <-> right; roll and yaw angles change sign, pitch / knee / elbow angles keep it
 - the 13 query links: left <-> right; the gait clock shifts half a period (sin, cos) -> (-sin, -cos)
+- robot-centric grids (elevation map layers, voxel grid): the lateral axis reverses (cell y -> -y), values keep
+  their sign (heights and occupancy are scalars)
 """
 
 from __future__ import annotations
@@ -15,8 +17,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+import numpy as np
 import torch
 from tensordict import TensorDict
+
+from cat.envs.perception import map_shape, voxel_shape
 
 if TYPE_CHECKING:
     from cat.envs.traversal_env import TraversalEnv
@@ -52,6 +57,12 @@ def _links(names: list[str], per_link: tuple[list[int], list[float]]) -> tuple[l
     return perm, sign
 
 
+def grid_mirror(shape: tuple[int, ...], layers: int = 1) -> tuple[list[int], list[float]]:
+    """(perm, sign) of ``layers`` row-major grids of ``shape`` (along, across, ...): the across axis reverses."""
+    idx = np.arange(layers * int(np.prod(shape))).reshape((layers, *shape))
+    return np.flip(idx, axis=2).reshape(-1).tolist(), [1.0] * idx.size
+
+
 def term_mirror(env: TraversalEnv, term: str) -> tuple[list[int], list[float]]:
     """(perm, sign) of one observation term's columns."""
     joints = env.robot.joint_names
@@ -72,6 +83,10 @@ def term_mirror(env: TraversalEnv, term: str) -> tuple[list[int], list[float]]:
         "link_positions": _links(links, POLAR),
         "foot_contacts": ([1, 0], [1.0, 1.0]),
         "dr_scales": ([0, 1, 2], [1.0, 1.0, 1.0]),
+        "elevation_map": grid_mirror(map_shape(env.cfg.perception.height_map), layers=2),
+        "ground_map": grid_mirror(map_shape(env.cfg.perception.height_map)),
+        "overhead_map": grid_mirror(map_shape(env.cfg.perception.height_map)),
+        "voxel_grid": grid_mirror(voxel_shape(env.cfg.perception.voxel_grid)),
     }
     if term not in table:
         raise ValueError(f"observation term {term!r} has no mirror map; add one in cat.envs.symmetry.term_mirror")

@@ -1,8 +1,9 @@
 """G1 goal-reaching / traversal env implementing rsl_rl's VecEnv (auto-reset inside ``step``).
 
-Observation groups: ``actor`` (deployable: IMU, joints, actions, goal, gait clock, HumanoidPF block) and
-``critic`` (actor terms without noise + privileged state). Terms are the plain functions of
-``cat.envs.mdp``, selected by name in ``EnvCfg.observations`` / ``.rewards`` (weights) / ``.terminations``.
+Observation groups are named in ``EnvCfg.observations`` (by default ``actor``: deployable IMU, joints, actions,
+goal, gait clock, HumanoidPF block; ``critic``: the actor terms without noise + privileged state) and built by
+``cat.envs.obs_groups``. Terms are the plain functions of ``cat.envs.mdp``, selected by name in
+``EnvCfg.observations`` / ``.rewards`` (weights) / ``.terminations``.
 """
 
 from __future__ import annotations
@@ -19,10 +20,12 @@ from cat.envs.config import EnvCfg
 from cat.envs.curriculum import DifficultyCurriculum
 from cat.envs.field_source import FieldSample
 from cat.envs.math_utils import quat_rotate_inverse, rotate_yaw_inverse, yaw_from_quat, yaw_quat
-from cat.envs.mdp import observations as obs_terms
+from cat.envs.mdp import events
 from cat.envs.mdp import rewards as rew_terms
 from cat.envs.mdp import terminations as term_terms
-from cat.envs.mdp.commands import command_speed
+from cat.envs.mdp.commands import command_source, velocity_command
+from cat.envs.obs_groups import ObservationGroups, lookup_term
+from cat.envs.perception import ScenePerception
 from cat.envs.robot import RobotCfg, home_qpos, load_robot_cfg
 from cat.envs.scene import (
     COLLISION_SENSOR,
@@ -78,6 +81,9 @@ class TraversalEnv(VecEnv):
         self.max_episode_length = int(math.ceil(cfg.episode_length_s / self.dt))
         self.generator = torch.Generator(device="cpu").manual_seed(seed)
         self.scenes = scenes
+        self.observation_groups = ObservationGroups(cfg)  # checks group and term names before anything is built
+        self._command_direction = command_source(cfg.command.source)
+        rew_terms.heading_gate(cfg.rewards.params.heading_gate)
 
         model = build_env_model(self.robot, scenes.add_to_spec if scenes is not None else None)
         self.sim = make_backend(sim, model, self.num_envs, self.robot.decimation, device=device)
@@ -91,6 +97,7 @@ class TraversalEnv(VecEnv):
             if scenes is not None
             else fsrc.GoalField(eta=self.field_cfg.eta, free_sdf=cfg.field_obs.sdf_clip)
         )
+        self.perception = ScenePerception(cfg.perception, scenes, self.device)
         self._init_buffers(model)
         self.reset_idx(torch.arange(self.num_envs, device=self.device))
         self._compute_obs()
@@ -129,12 +136,10 @@ class TraversalEnv(VecEnv):
         self.reward_names = [
             f.name for f in fields(self.cfg.rewards) if f.type == "float" and getattr(self.cfg.rewards, f.name) != 0.0
         ]
-        obs_cfg = self.cfg.observations
-        self.obs_groups = {"actor": list(obs_cfg.actor), "critic": list(obs_cfg.actor) + list(obs_cfg.privileged)}
-        self._obs_fns = {t: _term(obs_terms, t, "observation") for t in obs_cfg.actor + obs_cfg.privileged}
+        self.obs_groups = self.observation_groups.groups  # group name -> terms, in order (symmetry, layouts)
         self._mirror_map = None
         for t in self.cfg.terminations.terms:
-            _term(term_terms, t, "termination")
+            lookup_term(term_terms, t, "termination")
         self.episode_sums = {name: torch.zeros(n, **f32) for name in self.reward_names}
         names = r.query_site_names
         self._foot_link = [names.index("query_left_foot"), names.index("query_right_foot")]
@@ -196,7 +201,7 @@ class TraversalEnv(VecEnv):
             getattr(self.state, f.name)[env_ids] = getattr(new, f.name)
 
     def _update_field(self, env_ids: torch.Tensor | None = None) -> None:
-        """Field at the links now (for rewards) and the command velocity from F_H at the root.
+        """Field at the links now (for rewards) and the velocity command (its direction from ``command.source``).
 
         With ``env_ids`` only those envs are re-queried (after their reset); the others keep this step's values.
         """
@@ -206,9 +211,7 @@ class TraversalEnv(VecEnv):
         field = self.field_source.sample(link_pos, goals, env_ids)
         hpf = humanoid_pf(field.force, field.grad_sdf, field.sdf, link_vel, self.w0, self.field_cfg.lam)
         dist = horizontal_distance(root_xy, goals)
-        root_dir = hpf[:, 0, :2]
-        root_dir = root_dir / root_dir.norm(dim=-1, keepdim=True).clamp_min(1e-6)
-        cmd = root_dir * command_speed(dist, self.cfg.command)[:, None]
+        cmd = velocity_command(self._command_direction(hpf, root_xy, goals), dist, self.cfg.command)
         if env_ids is None:
             self.field, self.humanoid_pf, self.goal_distance, self.command_vel = field, hpf, dist, cmd
             return
@@ -282,7 +285,7 @@ class TraversalEnv(VecEnv):
                 "fell": self.trial.fell[done_ids].clone(),
             }
             self.reset_idx(done_ids)
-        self._apply_pushes()
+        events.push_robots(self)
         self._compute_obs()
         return self.obs_buf, reward, dones.to(torch.long), extras
 
@@ -370,7 +373,7 @@ class TraversalEnv(VecEnv):
         self.trial.load_state_dict(snap["trial"])
         self.common_step = snap["common_step"]
         if self.cfg.domain_rand.enabled:
-            self._apply_dr(torch.arange(self.num_envs), self.dr_scales)
+            events.apply_physics_scales(self, torch.arange(self.num_envs), self.dr_scales)
         self.sim.set_state(snap["sim"])
         if self.scenes is not None:
             self.scenes.scene_of_env.copy_(snap["scene_of_env"])
@@ -441,7 +444,7 @@ class TraversalEnv(VecEnv):
         qpos[:, 7:] += uniform(-0.05, 0.05, k, self.robot.num_joints).double()
         qvel = torch.zeros(k, self.sim.model.nv, device=dev, dtype=torch.float64)
         if self.cfg.domain_rand.enabled:
-            self._randomise(env_ids)
+            events.randomise_physics(self, env_ids)
         self.sim.reset(env_ids, qpos, qvel)
 
         self.goals[env_ids] = goal.to(torch.float32)
@@ -466,69 +469,6 @@ class TraversalEnv(VecEnv):
         self.trial.start(env_ids, self.goal_distance[env_ids], self.state.collision[env_ids], self._fell()[env_ids])
         self._refresh_field_obs(env_ids)
 
-    def _randomise(self, env_ids: torch.Tensor) -> None:
-        dr, k, g = self.cfg.domain_rand, len(env_ids), self.generator
-
-        def u(rng, *shape):
-            return rng[0] + (rng[1] - rng[0]) * torch.rand(*shape, generator=g)
-
-        scales = torch.cat((u(dr.kp_scale, k, 1), u(dr.kd_scale, k, 1), u(dr.mass_scale, k, 1)), dim=-1)
-        self._apply_dr(env_ids, scales)
-
-    def _apply_dr(self, env_ids: torch.Tensor, scales: torch.Tensor) -> None:
-        """Set worlds' PD gains and body masses from per-env (kp, kd, mass) scale factors (k, 3)."""
-        scales = scales.to("cpu", torch.float32, copy=True)
-        kp_s, kd_s, m_s = scales[:, :1], scales[:, 1:2], scales[:, 2:3]
-        base_kp, base_kd = torch.tensor(self.robot.kp), torch.tensor(self.robot.kd)
-        self.sim.set_actuator_gains(env_ids, base_kp * kp_s, base_kd * kd_s)
-        self.sim.set_body_mass_scale(env_ids, m_s.expand(len(env_ids), self.sim.model.nbody))
-        self.kp[env_ids] = (base_kp * kp_s).to(self.device, torch.float32)
-        self.kd[env_ids] = (base_kd * kd_s).to(self.device, torch.float32)
-        self.dr_scales[env_ids] = scales.to(self.device)
-
-    def _apply_pushes(self) -> None:
-        p = self.cfg.push
-        if not p.enabled:
-            return
-        self.push_timer -= self.dt
-        ids = (self.push_timer <= 0).nonzero(as_tuple=False).flatten()
-        if len(ids) == 0:
-            return
-        k, g = len(ids), self.generator
-        angle = 2 * math.pi * torch.rand(k, generator=g)
-        speed = p.speed[0] + (p.speed[1] - p.speed[0]) * torch.rand(k, generator=g)
-        qpos, qvel = self.sim.qpos[ids].clone(), self.sim.qvel[ids].clone()
-        qvel[:, 0] += (speed * angle.cos()).to(qvel)
-        qvel[:, 1] += (speed * angle.sin()).to(qvel)
-        self.sim.reset(ids, qpos, qvel)
-        self.push_timer[ids] = (p.interval_s[0] + (p.interval_s[1] - p.interval_s[0]) * torch.rand(k, generator=g)).to(
-            self.device
-        )
-
     # --- observations ------------------------------------------------------------------------------------
     def _compute_obs(self) -> None:
-        noise = self.cfg.noise
-        actor, clean = [], []
-        for name in self.cfg.observations.actor:
-            value = self._obs_fns[name](self)
-            clean.append(value)
-            scale = getattr(noise, name, 0.0)
-            if noise.enabled and scale > 0:
-                value = value + scale * (2 * torch.rand(value.shape, device=self.device) - 1)
-            actor.append(value)
-        critic = clean + [self._obs_fns[name](self) for name in self.cfg.observations.privileged]
-        self.obs_buf = TensorDict(
-            {"actor": torch.cat(actor, dim=-1), "critic": torch.cat(critic, dim=-1)},
-            batch_size=[self.num_envs],
-            device=self.device,
-        )
-
-
-def _term(module, name: str, kind: str):
-    """Look up a term function by name, with an error listing the valid names."""
-    fn = getattr(module, name, None)
-    if fn is None or name.startswith("_") or not callable(fn):
-        valid = sorted(k for k, v in vars(module).items() if callable(v) and not k.startswith("_") and k[0].islower())
-        valid = [k for k in valid if getattr(getattr(module, k), "__module__", "") == module.__name__]
-        raise ValueError(f"unknown {kind} term {name!r}; valid: {', '.join(valid)}")
-    return fn
+        self.obs_buf = self.observation_groups.compute(self)

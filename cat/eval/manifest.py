@@ -23,6 +23,7 @@ from pathlib import Path
 
 import yaml
 
+from cat.envs.obs_groups import group_layout
 from cat.learning.config import TrainCfg
 from cat.learning.runs import CheckpointError, load_run_config
 
@@ -53,8 +54,9 @@ class Manifest:
 
 
 def obs_layout(cfg: TrainCfg) -> tuple:
-    """What fixes the policy's input: the actor's observation terms, in order, and whether the field block is live."""
-    return tuple(cfg.task.observations.actor), bool(cfg.task.field_obs.enabled)
+    """What fixes the policy's input: the actor group's terms, in order, whether the field block is live, and the
+    grid sizes of its map terms (``cat.envs.obs_groups.group_layout``)."""
+    return group_layout(cfg.task, "actor")
 
 
 def load_manifest(path: str | os.PathLike) -> Manifest:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -38,10 +39,13 @@ class AlgoCfg:
     save_interval: int = 50
     symmetry_augment: bool = False  # add left/right mirrored samples to every PPO mini-batch (cat.envs.symmetry)
     mirror_loss_coeff: float = 0.0  # > 0: also penalise disagreement between the policy and its mirror image
+    # rsl_rl observation sets -> the env's observation groups (task.observations) each network reads, concatenated
+    obs_groups: dict[str, list[str]] = field(default_factory=lambda: {"actor": ["actor"], "critic": ["critic"]})
 
 
 @dataclass
 class TrainCfg:
+    method: str = "ours"  # the configs/method/<name>.yaml applied to task (recorded; docs/baselines.md)
     task: EnvCfg = field(default_factory=EnvCfg)
     sim: SimCfg = field(default_factory=SimCfg)
     algo: AlgoCfg = field(default_factory=AlgoCfg)
@@ -69,13 +73,36 @@ def _symmetry_cfg(algo: AlgoCfg) -> dict[str, Any] | None:
     }
 
 
-def runner_cfg(algo: AlgoCfg) -> dict[str, Any]:
-    """rsl_rl 5.5 ``OnPolicyRunner`` config dict."""
+PPO_OBS_SETS = ("actor", "critic")
+
+
+def check_obs_groups(obs_groups: dict[str, list[str]], env_groups: Iterable[str]) -> None:
+    """``algo.obs_groups`` must map PPO's sets to groups the env builds (one-line ``ValueError`` naming the entry)."""
+    env_groups = list(env_groups)
+    for obs_set, groups in obs_groups.items():
+        if obs_set not in PPO_OBS_SETS:
+            raise ValueError(f"algo.obs_groups has unknown set {obs_set!r}; valid: {', '.join(PPO_OBS_SETS)}")
+        if not groups:
+            raise ValueError(f"algo.obs_groups.{obs_set} lists no observation group")
+        for g in groups:
+            if g not in env_groups:
+                raise ValueError(
+                    f"algo.obs_groups.{obs_set} names observation group {g!r} that the env does not build; "
+                    f"groups (task.observations): {', '.join(env_groups)}"
+                )
+
+
+def runner_cfg(algo: AlgoCfg, env_groups: Iterable[str] | None = None) -> dict[str, Any]:
+    """rsl_rl 5.5 ``OnPolicyRunner`` config dict; with ``env_groups`` the observation sets are checked against
+    the groups the env builds."""
+    obs_groups = {k: list(v) for k, v in algo.obs_groups.items()}
+    if env_groups is not None:
+        check_obs_groups(obs_groups, env_groups)
     return {
         "num_steps_per_env": algo.num_steps_per_env,
         "save_interval": algo.save_interval,
         "check_for_nan": False,
-        "obs_groups": {"actor": ["actor"], "critic": ["critic"]},
+        "obs_groups": obs_groups,
         "logger": {"class_name": "cat.learning.rerun_writer:RerunLogWriter"},
         "algorithm": {
             "class_name": "PPO",

@@ -42,7 +42,9 @@ def load_config(overrides: list[str], config_name: str = "train", schema=TrainCf
                 f"unknown {key} {item.split('=', 1)[1]!r}; valid {key} options: {', '.join(_options(key))}"
             )
         valid = valid_keys(schema())
-        if key not in valid and key not in groups:
+        # keys inside mapping-valued fields (task.observations.<group>.terms) are checked by hydra against the schema
+        inside = any(key.startswith(v + ".") for v in valid)
+        if key not in valid and key not in groups and not inside:
             raise ConfigError(unknown_key_message(key, valid + groups))
     GlobalHydra.instance().clear()
     try:

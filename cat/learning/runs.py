@@ -15,9 +15,10 @@ from omegaconf import OmegaConf
 from rsl_rl.runners import OnPolicyRunner
 
 import cat
+from cat.envs.obs_groups import resolve_groups, upgrade_legacy_observations
 from cat.envs.sim import BACKENDS
 from cat.envs.traversal_env import TraversalEnv
-from cat.learning.config import TrainCfg, runner_cfg
+from cat.learning.config import TrainCfg, check_obs_groups, runner_cfg
 from cat.learning.progress import BudgetReached, install_iteration_hook, quiet_constructor
 from cat.terrain import TYPICAL_KINDS
 
@@ -117,6 +118,7 @@ def validate_train_cfg(cfg: TrainCfg) -> None:
             )
     if cfg.task.episode_length_s <= 0:
         raise ValueError(f"task.episode_length_s={cfg.task.episode_length_s}: must be > 0")
+    check_obs_groups(cfg.algo.obs_groups, resolve_groups(cfg.task.observations))  # names, before any env is built
     if cfg.sim.backend not in BACKENDS:
         raise ValueError(f"unknown sim backend {cfg.sim.backend!r}; valid: {', '.join(BACKENDS)}")
     for path in (cfg.init, cfg.resume):
@@ -154,6 +156,8 @@ def load_run_config(checkpoint: str | os.PathLike) -> TrainCfg:
     if "scene_seed" not in task and task.get("scene_kind"):
         # runs from before task.scene_seed built their typical scenes from the RL seed: keep their scenes
         raw.setdefault("task", {})["scene_seed"] = raw.get("seed", 0)
+    if raw.get("task"):
+        raw["task"] = upgrade_legacy_observations(raw["task"])  # runs from before named observation groups
     schema = OmegaConf.structured(TrainCfg)
     return OmegaConf.to_object(OmegaConf.merge(schema, raw))
 
@@ -161,15 +165,18 @@ def load_run_config(checkpoint: str | os.PathLike) -> TrainCfg:
 def resume_config(checkpoint: str | os.PathLike, overrides: list[str]) -> TrainCfg:
     """The config of the run being resumed, with only the keys given on the command line changed.
 
-    Config-group choices (``task=``, ``sim=``, ``algo=``) cannot change on resume: the run keeps its own.
+    Config-group choices (``task=``, ``sim=``, ``algo=``, ``method=``) cannot change on resume: the run keeps its
+    own.
     """
     base = OmegaConf.structured(load_run_config(checkpoint))
     dotlist = []
     for item in overrides:
         key, value = item.split("=", 1)
-        if key in ("task", "sim", "algo", "field"):
+        if key in ("task", "sim", "algo", "field", "method"):
             if key == "task" and value != base.task.task:
                 raise ValueError(f"resume={checkpoint} continues task {base.task.task!r}; drop task={value}")
+            if key == "method" and value != base.method:
+                raise ValueError(f"resume={checkpoint} continues method {base.method!r}; drop method={value}")
             continue
         dotlist.append(item)
     merged = OmegaConf.merge(base, OmegaConf.from_dotlist(dotlist))
@@ -241,7 +248,7 @@ def _train_in(cfg: TrainCfg, env: TraversalEnv, run_dir: Path) -> Path:
     save_config(cfg, run_dir)
     log.info("run folder: %s", run_dir)
     with quiet_constructor(cfg.verbose):
-        runner = OnPolicyRunner(env, runner_cfg(cfg.algo), log_dir=str(run_dir), device=str(env.device))
+        runner = OnPolicyRunner(env, runner_cfg(cfg.algo, env.obs_groups), log_dir=str(run_dir), device=str(env.device))
     runner.logger.git_status_repos = [cat.__file__]  # record this project's commit and diff in <run>/git/
     if cfg.resume:
         _restore_training_state(runner, env, cfg.resume, runner.load(cfg.resume))
@@ -277,7 +284,7 @@ def _train_in(cfg: TrainCfg, env: TraversalEnv, run_dir: Path) -> Path:
 
 def load_policy(checkpoint: str | os.PathLike, env: TraversalEnv, cfg: TrainCfg):
     """Deterministic inference policy of a PPO checkpoint for ``env``."""
-    runner = OnPolicyRunner(env, runner_cfg(cfg.algo), log_dir=None, device=str(env.device))
+    runner = OnPolicyRunner(env, runner_cfg(cfg.algo, env.obs_groups), log_dir=None, device=str(env.device))
     try:
         runner.load(str(checkpoint), load_cfg={"actor": True}, strict=True)
     except (RuntimeError, KeyError) as err:

@@ -57,6 +57,31 @@ def field_block(env: TraversalEnv) -> torch.Tensor:
     return env.field_obs_buf.reshape(env.num_envs, -1)
 
 
+def elevation_map(env: TraversalEnv) -> torch.Tensor:
+    """Two-layer elevation map around the robot (ground then overhead layer, each row-major along x, across y).
+
+    World heights [m] of the obstacle tops below / undersides above each cell of a yaw-aligned grid
+    (``perception.height_map``); the ASTraversal observation and the paper's w/o OBS_field replacement.
+    """
+    ground, overhead = env.perception.elevation(env.state.root_pos, env.state.yaw)
+    return torch.cat((ground, overhead), dim=-1)
+
+
+def ground_map(env: TraversalEnv) -> torch.Tensor:
+    """The ground layer alone: terrain below the feet (Humanoid Parkour's height map)."""
+    return env.perception.elevation(env.state.root_pos, env.state.yaw)[0]
+
+
+def overhead_map(env: TraversalEnv) -> torch.Tensor:
+    """The overhead layer alone (the overhead perception the paper adds to Humanoid Parkour)."""
+    return env.perception.elevation(env.state.root_pos, env.state.yaw)[1]
+
+
+def voxel_grid(env: TraversalEnv) -> torch.Tensor:
+    """Robot-centric occupancy in {0, 1} (``perception.voxel_grid``), row-major (x, y, z): Table III's voxel input."""
+    return env.perception.voxels(env.state.root_pos, env.state.yaw)
+
+
 # --- privileged (critic) terms --------------------------------------------------------------------------
 def base_lin_vel(env: TraversalEnv) -> torch.Tensor:
     return rotate_yaw_inverse(env.state.yaw, env.state.root_lin_vel)

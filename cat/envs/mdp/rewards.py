@@ -36,18 +36,38 @@ def track_velocity(env: TraversalEnv) -> torch.Tensor:
     return torch.exp(-err / env.cfg.rewards.params.velocity_sigma)
 
 
+def _gate_field(env: TraversalEnv) -> torch.Tensor:
+    """Open space by HumanoidPF's SDF: every query link at least ``heading_clearance`` from obstacles."""
+    return env.field.sdf.amin(dim=-1) > env.cfg.rewards.params.heading_clearance
+
+
+def _gate_none(env: TraversalEnv) -> torch.Tensor:
+    return torch.ones(env.num_envs, dtype=torch.bool, device=env.device)
+
+
+HEADING_GATES = {"field": _gate_field, "none": _gate_none}
+
+
+def heading_gate(name: str):
+    """The gate of ``params.heading_gate``, or ``ValueError`` naming it and the valid gates."""
+    if name not in HEADING_GATES:
+        raise ValueError(f"unknown heading gate {name!r}; valid: {', '.join(HEADING_GATES)}")
+    return HEADING_GATES[name]
+
+
 def track_heading(env: TraversalEnv) -> torch.Tensor:
     """Face the commanded direction in open space; 1 (free) near obstacles, where side-stepping may be needed.
 
-    Gated off while any query link is within ``heading_clearance`` of an obstacle (side passes need the body
-    turned across the direction of travel) and while the command is slower than ``standing_speed``.
+    Gated off where ``params.heading_gate`` says the robot is near obstacles (``field``: a query link within
+    ``heading_clearance`` by the SDF; side passes need the body turned across the direction of travel;
+    ``none``: never) and while the command is slower than ``standing_speed``.
     """
     p = env.cfg.rewards.params
     cmd = env.command_vel
     speed = cmd.norm(dim=-1)
     heading = torch.stack((torch.cos(env.state.yaw), torch.sin(env.state.yaw)), dim=-1)
     cos = (heading * cmd).sum(dim=-1) / speed.clamp_min(1e-6)
-    active = (speed > p.standing_speed) & (env.field.sdf.amin(dim=-1) > p.heading_clearance)
+    active = (speed > p.standing_speed) & HEADING_GATES[p.heading_gate](env)
     return torch.where(active, cos, torch.ones_like(cos))
 
 
@@ -126,6 +146,23 @@ def sdf_barrier(env: TraversalEnv) -> torch.Tensor:
     """Soft barrier on the signed distance at the query links: sum_k softplus((margin - d_k) / width)."""
     p = env.cfg.rewards.params
     return F.softplus((p.barrier_margin - env.field.sdf) / p.barrier_width).sum(dim=-1)
+
+
+def map_clearance(env: TraversalEnv) -> torch.Tensor:
+    """ASTraversal-style obstacle avoidance on the elevation map (no HumanoidPF), summed over the 13 links:
+
+    softplus((g + margin - z) / width) where the ground layer g under a link is an obstacle (g > 1 cm), plus
+    softplus((z + margin - o) / width) where the overhead layer o above it is an obstacle (o < cap). The same
+    margin / width as ``sdf_barrier``, measured vertically against the map cell (pooled over its footprint)
+    under each link instead of by the SDF.
+    """
+    p = env.cfg.rewards.params
+    cap = env.cfg.perception.height_map.overhead_cap
+    z = env.state.link_pos[..., 2]
+    ground, overhead = env.perception.layers_at(env.state.link_pos[..., :2])
+    below = F.softplus((ground + p.barrier_margin - z) / p.barrier_width) * (ground > 0.01)
+    above = F.softplus((z + p.barrier_margin - overhead) / p.barrier_width) * (overhead < cap)
+    return (below + above).sum(dim=-1)
 
 
 def collision(env: TraversalEnv) -> torch.Tensor:

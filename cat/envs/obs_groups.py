@@ -1,0 +1,150 @@
+"""Observation groups by name: any number of groups (``actor``, ``critic``, ``teacher``, ``student``, ...) built
+from term lists in ``EnvCfg.observations``, each with its own noise switch, so baselines and distillation only
+change config.
+
+A group's terms are the functions of ``cat.envs.mdp.observations`` named in its list, concatenated in order,
+after the resolved terms of the group it ``extends``. Every term is evaluated once per step and shared by the
+groups that list it; groups with ``noise: true`` add ``NoiseCfg``'s per-term noise to their copy.
+"""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Callable
+from typing import TYPE_CHECKING
+
+import torch
+from tensordict import TensorDict
+
+from cat.envs.config import PRIVILEGED_TERMS, EnvCfg, ObsGroupCfg
+from cat.envs.mdp import observations as obs_terms
+
+if TYPE_CHECKING:
+    from cat.envs.traversal_env import TraversalEnv
+
+FLIP_NOISE_TERMS = frozenset({"voxel_grid"})  # occupancy in {0, 1}: noise flips cells instead of adding to them
+
+
+def lookup_term(module, name: str, kind: str) -> Callable:
+    """A term function of ``module`` by name, or ``ValueError`` naming it and listing the valid names."""
+    fn = getattr(module, name, None)
+    if fn is None or name.startswith("_") or not callable(fn) or getattr(fn, "__module__", "") != module.__name__:
+        raise ValueError(f"unknown {kind} term {name!r}; valid: {', '.join(term_names(module))}")
+    return fn
+
+
+def term_names(module) -> list[str]:
+    """Public functions defined in ``module`` (the valid term names)."""
+    return sorted(
+        k
+        for k, v in vars(module).items()
+        if callable(v) and not k.startswith("_") and k[0].islower() and getattr(v, "__module__", "") == module.__name__
+    )
+
+
+def resolve_groups(groups: dict[str, ObsGroupCfg]) -> dict[str, list[str]]:
+    """Group name -> full term list (``extends`` expanded), in config order; one-line ``ValueError`` on bad input."""
+    if not groups:
+        raise ValueError("task.observations defines no observation group")
+    out: dict[str, list[str]] = {}
+
+    def resolve(name: str, chain: tuple[str, ...]) -> list[str]:
+        if name in out:
+            return out[name]
+        if name in chain:
+            raise ValueError(f"observation groups extend each other in a cycle: {' -> '.join(chain + (name,))}")
+        group = groups[name]
+        parent: list[str] = []
+        if group.extends:
+            if group.extends not in groups:
+                raise ValueError(
+                    f"observation group {name!r} extends unknown group {group.extends!r}; groups: {', '.join(groups)}"
+                )
+            parent = resolve(group.extends, chain + (name,))
+        terms = parent + list(group.terms)
+        if not terms:
+            raise ValueError(f"observation group {name!r} has no terms")
+        dup = sorted({t for t in terms if terms.count(t) > 1})
+        if dup:
+            raise ValueError(f"observation group {name!r} lists term {dup[0]!r} more than once")
+        out[name] = terms
+        return terms
+
+    for name in groups:
+        resolve(name, ())
+    return {name: out[name] for name in groups}
+
+
+class ObservationGroups:
+    """Builds the env's observation ``TensorDict`` from the configured groups."""
+
+    def __init__(self, cfg: EnvCfg, module=obs_terms):
+        self.cfg = cfg
+        self.groups = resolve_groups(cfg.observations)
+        self.noisy = {name: bool(g.noise) for name, g in cfg.observations.items()}
+        names = dict.fromkeys(t for terms in self.groups.values() for t in terms)
+        self.fns = {t: lookup_term(module, t, "observation") for t in names}
+
+    def uses(self, *terms: str) -> bool:
+        """Whether any group lists one of ``terms``."""
+        return any(t in self.fns for t in terms)
+
+    def compute(self, env: TraversalEnv) -> TensorDict:
+        """Every group for all envs; each term evaluated once, noise drawn per noisy group in term order."""
+        values: dict[str, torch.Tensor] = {}
+        noise = self.cfg.noise
+        out = {}
+        for group, terms in self.groups.items():
+            parts = []
+            for name in terms:
+                if name not in values:
+                    values[name] = self.fns[name](env)
+                value = values[name]
+                scale = getattr(noise, name, 0.0)
+                if self.noisy[group] and noise.enabled and scale > 0:
+                    value = _noisy(name, value, scale)
+                parts.append(value)
+            out[group] = torch.cat(parts, dim=-1)
+        return TensorDict(out, batch_size=[env.num_envs], device=env.device)
+
+
+def _noisy(name: str, value: torch.Tensor, scale: float) -> torch.Tensor:
+    if name in FLIP_NOISE_TERMS:
+        flip = torch.rand(value.shape, device=value.device) < scale
+        return torch.where(flip, 1.0 - value, value)
+    return value + scale * (2 * torch.rand(value.shape, device=value.device) - 1)
+
+
+def group_layout(task: EnvCfg, group: str = "actor") -> tuple:
+    """What fixes a group's input width and meaning: its resolved terms, in order, whether the field block is
+    live, and the perception grid sizes of the map terms it lists (a checkpoint plays only on its own layout)."""
+    terms = resolve_groups(task.observations).get(group, [])
+    layout: tuple = (tuple(terms), bool(task.field_obs.enabled))
+    if {"elevation_map", "ground_map", "overhead_map"} & set(terms):
+        hm = task.perception.height_map
+        layout += (("height_map", hm.length, hm.width, hm.resolution, hm.forward_offset),)
+    if "voxel_grid" in terms:
+        vg = task.perception.voxel_grid
+        layout += (("voxel_grid", vg.length, vg.width, vg.height, vg.resolution, vg.forward_offset),)
+    return layout
+
+
+def upgrade_legacy_observations(raw_task: dict) -> dict:
+    """A run config's ``task`` mapping with the pre-groups observation layout translated to named groups.
+
+    Runs written before named groups stored ``observations: {actor: [terms], privileged: [terms]}`` and the env
+    built ``actor`` (noisy) and ``critic`` = actor terms + privileged (clean); this returns the same groups in
+    today's form, so those checkpoints keep loading. Other mappings are returned unchanged.
+    """
+    obs = raw_task.get("observations")
+    if not isinstance(obs, dict) or not isinstance(obs.get("actor"), list):
+        return raw_task
+    unknown = sorted(set(obs) - {"actor", "privileged"})
+    if unknown:
+        raise ValueError(f"old-style task.observations has unknown key {unknown[0]!r}; valid: actor, privileged")
+    task = copy.deepcopy(raw_task)
+    task["observations"] = {
+        "actor": {"terms": list(obs["actor"]), "extends": "", "noise": True},
+        "critic": {"terms": list(obs.get("privileged", PRIVILEGED_TERMS)), "extends": "actor", "noise": False},
+    }
+    return task

@@ -1,0 +1,142 @@
+"""The paper's baselines as one-word methods (``method=``): composition and recording, no reward term reading
+HumanoidPF where the paper removes it, the straight-line command, ASTraversal's map clearance reward on an
+analytic scene, and every method training for one iteration, loading and playing from its own config.yaml."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+import yaml
+
+from cat.envs.field_source import FieldSample
+from cat.envs.mdp import rewards as rew
+from cat.eval.manifest import ManifestError, load_manifest
+from cat.learning.hydra_cfg import ConfigError, load_config
+from cat.learning.play import PlayCfg, play
+from cat.learning.runs import load_run_config, make_env, resume_config, train
+
+METHODS = ("ours", "wo_obs_field", "wo_r_field", "astraversal", "humanoid_parkour")
+FIELD_FREE_REWARD = ("wo_r_field", "astraversal", "humanoid_parkour")
+TASK = ["task=hurdle_crouch", "task.scene_variants=1", "num_envs=2"]
+
+
+def test_methods_compose_and_are_recorded():
+    got = {m: load_config([f"method={m}"]) for m in METHODS}
+    for m, cfg in got.items():
+        assert cfg.method == m
+    actor = {m: cfg.task.observations["actor"].terms for m, cfg in got.items()}
+    assert actor["ours"][-1] == actor["wo_r_field"][-1] == "field_block"
+    assert actor["wo_obs_field"][-1] == actor["astraversal"][-1] == "elevation_map"
+    assert actor["humanoid_parkour"][-2:] == ["ground_map", "overhead_map"]
+    assert all(a[:-1] == actor["ours"][:-1] for m, a in actor.items() if m != "humanoid_parkour")
+    for m in FIELD_FREE_REWARD:
+        t = got[m].task
+        assert t.command.source == "straight" and t.rewards.params.heading_gate == "none"
+        assert t.rewards.field_vmf == 0 and t.rewards.sdf_barrier == 0
+    assert got["wo_r_field"].task.rewards.collision == got["humanoid_parkour"].task.rewards.collision == -20.0
+    assert got["astraversal"].task.rewards.map_clearance < 0 and got["astraversal"].task.rewards.collision == -5.0
+    assert got["ours"].task == load_config([]).task  # ours is the task as configured
+    with pytest.raises(ConfigError, match="unknown method 'astraversl'; valid method options: astraversal, "):
+        load_config(["method=astraversl"])
+
+
+def _reward_terms(env) -> dict[str, torch.Tensor]:
+    return {name: getattr(rew, name)(env) for name in env.reward_names}
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_which_rewards_read_humanoidpf(method):
+    """Rewards recomputed after replacing every field sample (F, d, grad d) by random values: unchanged for the
+    methods without R_field, changed for those with it (so the check can fail)."""
+    env = make_env(load_config(TASK + [f"method={method}"]))
+    env.step(torch.zeros(env.num_envs, env.num_actions))
+    before = _reward_terms(env)
+    gen = torch.Generator().manual_seed(0)
+
+    def random_field(points, goals, env_ids=None):
+        shape = points.shape[:-1]
+        return FieldSample(
+            force=torch.randn(*shape, 3, generator=gen),
+            sdf=0.3 * torch.rand(*shape, generator=gen) - 0.1,
+            grad_sdf=torch.randn(*shape, 3, generator=gen),
+            outside=torch.zeros(shape[0]),
+        )
+
+    env.field_source.sample = random_field
+    env._update_field()
+    after = _reward_terms(env)
+    changed = sorted(k for k in before if not torch.allclose(before[k], after[k]))
+    if method in FIELD_FREE_REWARD:
+        assert changed == [], changed
+    else:
+        assert {"field_vmf", "sdf_barrier", "track_velocity"} <= set(changed), changed
+
+
+def test_straight_command_points_at_the_goal():
+    env = make_env(load_config(TASK + ["method=wo_r_field"]))
+    env.step(torch.zeros(env.num_envs, env.num_actions))
+    to_goal = env.goals[:, :2] - env.state.root_pos[:, :2]
+    cos = torch.nn.functional.cosine_similarity(env.command_vel, to_goal, dim=-1)
+    assert (cos > 0.9999).all()
+    assert torch.allclose(env.command_vel.norm(dim=-1), torch.full((env.num_envs,), env.cfg.command.speed))
+
+
+def test_map_clearance_on_an_analytic_scene():
+    """A typical scene replaced by its elevation layers: one link at a hurdle's top height penalised, the same link
+    0.3 m above it not; under a ceiling the head near its underside is penalised; open floor costs nothing."""
+    env = make_env(load_config(["task=hurdle_crouch", "task.scene_variants=1", "num_envs=1", "method=astraversal"]))
+    ground, over = env.perception.layers_at(torch.tensor([[[x, y] for x in np.arange(0, 2, 0.02) for y in [0.0]]]))
+    g, o = ground[0].numpy(), over[0].numpy()
+    xs = np.arange(0, 2, 0.02)
+    assert g.max() > 0.05 and o.min() < 1.3, "the scene has a hurdle and a ceiling on its course"
+    x_hurdle, x_ceiling, x_open = xs[g.argmax()], xs[o.argmin()], xs[(g == 0) & (o == o.max())][0]
+    links = env.state.link_pos
+    links[:] = torch.tensor([x_open, 0.0, 0.6])  # every link in the open: no penalty
+    assert float(rew.map_clearance(env)) == 0.0
+    links[0, 0] = torch.tensor([x_hurdle, 0.0, float(g.max())])  # one link at the hurdle's top
+    at_top = float(rew.map_clearance(env))
+    links[0, 0, 2] += 0.3
+    assert at_top == pytest.approx(math.log1p(math.exp(0.05 / 0.02)), rel=1e-3)
+    assert float(rew.map_clearance(env)) < 1e-4
+    links[0, 0] = torch.tensor([x_ceiling, 0.0, float(o.min()) - 0.05])  # 5 cm below the underside
+    assert float(rew.map_clearance(env)) == pytest.approx(math.log(2.0), rel=1e-3)
+
+
+@pytest.fixture(scope="module")
+def method_runs(tmp_path_factory) -> dict[str, Path]:
+    """One 1-iteration run per method on a one-variant typical task."""
+    root = tmp_path_factory.mktemp("methods")
+    out = {}
+    for m in METHODS:
+        cfg = load_config(
+            TASK + [f"method={m}", "max_iterations=1", "algo.num_steps_per_env=4", f"run_root={root}", f"run_name={m}"]
+        )
+        out[m] = sorted(train(cfg).glob("model_*.pt"))[-1]
+    return out
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_each_method_trains_loads_and_plays(method_runs, method):
+    ckpt = method_runs[method]
+    raw = yaml.safe_load((ckpt.parent / "config.yaml").read_text())
+    assert raw["method"] == method
+    cfg = load_run_config(ckpt)
+    assert cfg.task.observations == load_config(TASK + [f"method={method}"]).task.observations
+    summary = play(PlayCfg(checkpoint=str(ckpt), episodes=2, time_s=0.5))
+    assert summary.trials == 2 and 0.0 <= summary.distance_error < 3.0
+    with pytest.raises(ValueError, match=f"continues method {method!r}; drop method=other"):
+        resume_config(ckpt, ["method=other"])
+
+
+def test_manifest_rejects_a_row_mixing_observation_layouts(method_runs, tmp_path):
+    ok = {"methods": {"A": [str(method_runs["ours"]), str(method_runs["wo_r_field"])]}, "table1": {}}
+    (tmp_path / "ok.yaml").write_text(yaml.safe_dump(ok))
+    load_manifest(tmp_path / "ok.yaml")  # same observation layout: one row may hold both
+    bad = {"methods": {"A": [str(method_runs["ours"]), str(method_runs["wo_obs_field"])]}, "table1": {}}
+    (tmp_path / "bad.yaml").write_text(yaml.safe_dump(bad))
+    with pytest.raises(ManifestError, match=f"checkpoint {method_runs['wo_obs_field']} observation layout"):
+        load_manifest(tmp_path / "bad.yaml")

@@ -364,8 +364,14 @@ class TraversalEnv(VecEnv):
         """Restore ``get_state``'s snapshot (same task and number of envs); checked before anything changes."""
         if snap.get("format") != self.SNAPSHOT_FORMAT:
             raise ValueError(f"env snapshot format {snap.get('format')} is not this code's {self.SNAPSHOT_FORMAT}")
+        current = self.get_state()
+        missing = sorted(set(current) - set(snap))
+        if missing:
+            raise ValueError(f"env snapshot lacks {', '.join(missing)}")
         if snap["targets"].shape != self.targets.shape:
             raise ValueError(f"env snapshot of {snap['targets'].shape[0]} envs cannot restore {self.num_envs} envs")
+        if set(snap["episode_sums"]) != set(self.episode_sums):
+            raise ValueError("env snapshot has other reward terms than this env")
         for name in self._SNAPSHOT:
             getattr(self, name).copy_(snap[name])
         for k, v in snap["episode_sums"].items():

@@ -5,6 +5,7 @@
 >>> f.sdf, f.geodesic, f.force  # numpy (nx, ny, nz[, 3])
 """
 
+from cat.fields._wp import init_warp
 from cat.fields.bank import QUERY_CHANNELS, FieldBank, FieldSample, SceneLayout, bank_bytes
 from cat.fields.config import FieldCfg, StaleFieldError
 from cat.fields.field import CHANNELS, Field, build_field, build_fields
@@ -31,6 +32,7 @@ __all__ = [
     "field_reward",
     "geodesic_distance",
     "humanoid_pf",
+    "init_warp",
     "log_c3",
     "mesh_sdf_at",
     "occupancy_from_points",

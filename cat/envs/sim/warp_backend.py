@@ -43,6 +43,7 @@ import torch
 import warp as wp
 
 from cat.envs.sim.base import PhysicsBackend
+from cat.fields import init_warp
 
 logger = logging.getLogger(__name__)
 
@@ -109,6 +110,7 @@ def _write_columns(acc: wp.array2d(dtype=float), cols: wp.array(dtype=int), sens
 
 def resolve_device(device: str | torch.device | None) -> str:
     """Warp device name: ``None`` -> ``"cuda:0"`` when Warp sees a GPU, else ``"cpu"``."""
+    init_warp()  # quiet start-up (cat.fields._wp)
     n_cuda = wp.get_cuda_device_count()
     device = str(device) if device is not None else None
     if device is None:

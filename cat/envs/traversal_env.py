@@ -19,11 +19,13 @@ from cat.envs import field_source as fsrc
 from cat.envs.config import EnvCfg
 from cat.envs.curriculum import DifficultyCurriculum
 from cat.envs.field_source import FieldSample
-from cat.envs.math_utils import quat_rotate_inverse, rotate_yaw_inverse, yaw_from_quat, yaw_quat
+from cat.envs.math_utils import quat_rotate_inverse, yaw_from_quat, yaw_quat
 from cat.envs.mdp import events
 from cat.envs.mdp import rewards as rew_terms
 from cat.envs.mdp import terminations as term_terms
+from cat.envs.mdp.actions import apply_actions, soft_joint_limits
 from cat.envs.mdp.commands import command_source, velocity_command
+from cat.envs.mdp.field_obs import field_obs
 from cat.envs.obs_groups import ObservationGroups, lookup_term
 from cat.envs.perception import ScenePerception
 from cat.envs.robot import RobotCfg, home_qpos, load_robot_cfg
@@ -110,8 +112,7 @@ class TraversalEnv(VecEnv):
         self.policy_ids = torch.tensor(r.policy_joint_ids, device=dev)
         self.knee_ids = torch.tensor([r.joint_names.index(j) for j in r.joint_names if "knee" in j], device=dev)
         rng = torch.tensor(model.jnt_range[1:], **f32)  # skip the free joint
-        mid, half = rng.mean(dim=-1), 0.5 * (rng[:, 1] - rng[:, 0]) * r.soft_limit_factor
-        self.soft_lower, self.soft_upper = mid - half, mid + half
+        self.soft_lower, self.soft_upper = soft_joint_limits(rng, r.soft_limit_factor)
         self.kp = torch.tensor(r.kp, **f32).repeat(n, 1)
         self.kd = torch.tensor(r.kd, **f32).repeat(n, 1)
         self.dr_scales = torch.ones(n, 3, **f32)
@@ -225,12 +226,13 @@ class TraversalEnv(VecEnv):
         if not self.cfg.field_obs.enabled:
             return
         ids = slice(None) if env_ids is None else env_ids
-        yaw = self.state.yaw[ids]
-        clip = self.cfg.field_obs.sdf_clip
-        fh = rotate_yaw_inverse(yaw, self.humanoid_pf[ids])
-        grad = rotate_yaw_inverse(yaw, self.field.grad_sdf[ids])
-        sdf = self.field.sdf[ids].clamp(-clip, clip).unsqueeze(-1)
-        self.field_obs_buf[ids] = torch.cat((fh, grad, sdf), dim=-1)
+        self.field_obs_buf[ids] = field_obs(
+            self.state.yaw[ids],
+            self.humanoid_pf[ids],
+            self.field.grad_sdf[ids],
+            self.field.sdf[ids],
+            self.cfg.field_obs,
+        )
 
     # --- VecEnv ------------------------------------------------------------------------------------------
     def get_observations(self) -> TensorDict:
@@ -240,9 +242,8 @@ class TraversalEnv(VecEnv):
         cfg = self.cfg
         self.prev_actions = self.actions
         self.actions = actions.to(self.device, torch.float32).clamp(-cfg.action_clip, cfg.action_clip)
-        ids = self.policy_ids
-        tgt = self.targets[:, ids] + self.robot.action_scale * self.actions
-        self.targets[:, ids] = torch.maximum(torch.minimum(tgt, self.soft_upper[ids]), self.soft_lower[ids])
+        scale = self.robot.action_scale
+        apply_actions(self.targets, self.actions, self.policy_ids, scale, self.soft_lower, self.soft_upper)
         self.sim.step(self.targets)
 
         self.episode_length_buf += 1

@@ -13,6 +13,7 @@ COMMANDS = {
     "gen": "cat.terrain.bench",
     "scale": "cat.envs.bench_scale",
     "soak": "cat.envs.bench_soak",
+    "live": "cat.deploy.bench",
 }
 
 

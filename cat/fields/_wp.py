@@ -29,14 +29,15 @@ if not warp_verbose():
 @contextlib.contextmanager
 def _native_stderr_silenced() -> Iterator[None]:
     """Send file descriptor 2 to /dev/null: Warp's native library prints its missing-CUDA-driver warning
-    there directly, past Python's logging."""
+    there directly (C ``stderr``), past Python's logging and past any replacement of ``sys.stderr``."""
+    fd = 2
+    with contextlib.suppress(AttributeError, OSError, ValueError):
+        sys.stderr.flush()
     try:
-        fd = sys.stderr.fileno()
-    except (AttributeError, OSError, ValueError):  # stderr replaced by an object without a descriptor
+        saved = os.dup(fd)
+    except OSError:  # no descriptor 2 at all
         yield
         return
-    sys.stderr.flush()
-    saved = os.dup(fd)
     try:
         with open(os.devnull, "w") as null:
             os.dup2(null.fileno(), fd)

@@ -32,6 +32,7 @@ setup(
         "pyyaml>=6.0",
         "tqdm>=4.66",
         "matplotlib>=3.8",
+        "viser>=1.0",  # click demo web view (scene.on_click / on_pointer_event)
     ],
     extras_require={
         "dev": [
@@ -40,6 +41,9 @@ setup(
             "ruff>=0.6",
             "scikit-fmm>=2024.5",
             "embreex>=2.17; platform_machine=='x86_64'",
+            # browser test of the click demo: drives the system's Chromium (Debian: apt-get install chromium)
+            "playwright>=1.40",
+            "pytest-playwright>=0.5",
         ],
     },
 )

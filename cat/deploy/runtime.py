@@ -184,6 +184,7 @@ class Runtime:
             self.outcome = Outcome()
             self._prev_link_pos: torch.Tensor | None = None
             self._links_step = -1
+            self._released = False
             self._in_contact = False
             self._update_state(self.estimate())
 
@@ -281,9 +282,10 @@ class Runtime:
 
     @property
     def on_gantry(self) -> bool:
-        """Before the first goal the robot hangs still in its standing pose (physics paused, sensors on): the
-        default pose alone does not balance a G1, and the demo should start standing whatever the policy."""
-        return self.goal_version == 0
+        """Until the policy first acts (a goal and its field) the robot hangs still in its standing pose: physics
+        paused, sensors and mapping on. The default pose alone does not balance a G1 (it tips over in ~1.5 s),
+        and the demo should start standing whatever the policy."""
+        return not self._released
 
     @property
     def walking(self) -> bool:
@@ -296,6 +298,7 @@ class Runtime:
             if self.step_count % self.field_refresh == 0:
                 self._refresh_field_obs()
             if self.walking:
+                self._released = True
                 with torch.inference_mode():
                     act = self.policy(self.observation())
                 self.actions = act.to(torch.float32).clamp(-self.task.action_clip, self.task.action_clip)

@@ -137,9 +137,16 @@ def _update_kernel(
     l_miss: float,
     l_min: float,
     l_max: float,
+    i0: int,
+    j0: int,
+    k0: int,
 ):
-    """Apply one scan's marks (hit wins) with clamping, and clear the marks."""
-    i, j, k = wp.tid()
+    """Apply one scan's marks (hit wins) with clamping, and clear the marks; the launch covers the scan's box
+    starting at voxel ``(i0, j0, k0)``."""
+    ii, jj, kk = wp.tid()
+    i = ii + i0
+    j = jj + j0
+    k = kk + k0
     if hit[i, j, k] != wp.uint8(0):
         logodds[i, j, k] = wp.min(logodds[i, j, k] + l_hit, l_max)
     elif miss[i, j, k] != wp.uint8(0):
@@ -176,30 +183,45 @@ class VoxelMap:
         """Insert one scan: sensor ``origin`` (3,) and its returns ``points`` (m, 3), world frame."""
         cfg, g = self.cfg, self.grid
         pts = np.asarray(points, dtype=np.float32).reshape(-1, 3)
+        origin = np.asarray(origin, dtype=np.float32).reshape(3)
         with self._lock:
-            if len(pts):
-                wp.launch(
-                    _trace_kernel,
-                    dim=len(pts),
-                    inputs=[
-                        wp.vec3(*np.asarray(origin, dtype=np.float32)),
-                        wp.array(pts, dtype=wp.vec3, device=self.device),
-                        wp.vec3(*g.origin),
-                        1.0 / g.voxel,
-                        *g.shape,
-                        cfg.ground_z,
-                        self._miss,
-                        self._hit,
-                    ],
-                    device=self.device,
-                )
+            self.scans += 1
+            if len(pts) == 0:
+                return
             wp.launch(
-                _update_kernel,
-                dim=g.shape,
-                inputs=[self._logodds, self._miss, self._hit, cfg.l_hit, cfg.l_miss, cfg.l_min, cfg.l_max],
+                _trace_kernel,
+                dim=len(pts),
+                inputs=[
+                    wp.vec3(*origin),
+                    wp.array(pts, dtype=wp.vec3, device=self.device),
+                    wp.vec3(*g.origin),
+                    1.0 / g.voxel,
+                    *g.shape,
+                    cfg.ground_z,
+                    self._miss,
+                    self._hit,
+                ],
                 device=self.device,
             )
-            self.scans += 1
+            # only voxels in the box spanned by the sensor and its returns can have been marked
+            span = np.vstack([pts, origin[None]])
+            lo = np.clip(np.floor((span.min(0) - g.origin) / g.voxel).astype(int), 0, np.array(g.shape) - 1)
+            hi = np.clip(np.floor((span.max(0) - g.origin) / g.voxel).astype(int) + 1, lo + 1, np.array(g.shape))
+            wp.launch(
+                _update_kernel,
+                dim=tuple(int(v) for v in hi - lo),
+                inputs=[
+                    self._logodds,
+                    self._miss,
+                    self._hit,
+                    cfg.l_hit,
+                    cfg.l_miss,
+                    cfg.l_min,
+                    cfg.l_max,
+                    *(int(v) for v in lo),
+                ],
+                device=self.device,
+            )
 
     def logodds(self) -> np.ndarray:
         """Copy of the log-odds grid (nx, ny, nz)."""

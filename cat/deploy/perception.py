@@ -188,8 +188,8 @@ class Perception:
                 self.latest = live
                 self.update_times.append(snap.estimate.time)
         t2 = time.perf_counter()
-        st = CycleStats((t1 - t0) * 1e3, (t2 - t1) * 1e3 if snap.goal is not None else 0.0, (t2 - t0) * 1e3, 0.0)
-        st.wall = time.monotonic()
+        field_ms = (t2 - t1) * 1e3 if snap.goal is not None else 0.0
+        st = CycleStats((t1 - t0) * 1e3, field_ms, (t2 - t0) * 1e3, time.monotonic())
         self.stats.append(st)
         return st
 

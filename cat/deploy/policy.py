@@ -47,8 +47,11 @@ def policy_spec(checkpoint: str) -> PolicySpec:
 class HoldPolicy:
     """Zero actions: the incremental PD targets stay at the default standing pose."""
 
+    def __init__(self, num_actions: int):
+        self.num_actions = num_actions
+
     def __call__(self, obs: TensorDict) -> torch.Tensor:
-        return torch.zeros(obs.batch_size[0], 12)
+        return torch.zeros(obs.batch_size[0], self.num_actions)
 
 
 def load_actor(spec: PolicySpec, obs: TensorDict, num_actions: int):
@@ -57,7 +60,7 @@ def load_actor(spec: PolicySpec, obs: TensorDict, num_actions: int):
     Built from the run's network config and loaded strictly: a checkpoint of another observation layout or
     a file that is not an rsl_rl checkpoint raises ``CheckpointError`` with the reason."""
     if spec.is_hold:
-        return HoldPolicy()
+        return HoldPolicy(num_actions)
     path = Path(spec.checkpoint)
     try:
         state = torch.load(path, map_location="cpu", weights_only=False)

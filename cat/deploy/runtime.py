@@ -137,6 +137,7 @@ class Runtime:
         names = set(self.robot.collision_geoms)
         self.geom_ids = np.array([i for i in range(self.model.ngeom) if self.model.geom(i).name in names])
         self._init_controller()
+        self.goal_version = 0
         self.reset()
         self.policy = load_actor(spec, self.observation(), len(self.robot.policy_joints))
 
@@ -174,8 +175,7 @@ class Runtime:
             self.actions = torch.zeros(1, len(self.robot.policy_joints), dtype=f32)
             self.phase = torch.zeros(1, dtype=f32)
             self.goals = torch.zeros(1, 3, dtype=f32)
-            self.goal: np.ndarray | None = None
-            self.goal_version = 0
+            self.goal: np.ndarray | None = None  # goal_version keeps counting: a field of an old goal never matches
             self.field_obs_buf = torch.zeros(1, len(self.robot.query_links), 7, dtype=f32)
             self.f_h = torch.zeros(1, len(self.robot.query_links), 3, dtype=f32)
             self.used_field: LiveField | None = None

@@ -38,16 +38,20 @@ class Recorder:
         self.caps = [i for i in ids if m.geom_type[i] == mujoco.mjtGeom.mjGEOM_CAPSULE]
         self.spheres = [i for i in ids if m.geom_type[i] == mujoco.mjtGeom.mjGEOM_SPHERE]
         self.boxes = [i for i in ids if m.geom_type[i] == mujoco.mjtGeom.mjGEOM_BOX]
-        if obstacles is not None and len(obstacles.faces):
-            self.rec.log(
-                "world/obstacles",
-                rr.Mesh3D(
-                    vertex_positions=obstacles.vertices,
-                    triangle_indices=obstacles.faces,
-                    albedo_factor=[0.6, 0.6, 0.65],
-                ),
-                static=True,
-            )
+        if obstacles is not None:
+            self.log_mesh(obstacles)
+
+    def log_mesh(self, obstacles) -> None:
+        """(Re-)log the obstacle mesh (static)."""
+        if len(obstacles.faces) == 0:
+            return
+        self.rec.log(
+            "world/obstacles",
+            rr.Mesh3D(
+                vertex_positions=obstacles.vertices, triangle_indices=obstacles.faces, albedo_factor=[0.6, 0.6, 0.65]
+            ),
+            static=True,
+        )
 
     def set_time(self, seconds: float) -> None:
         self.rec.set_time("sim_time", duration=seconds)
@@ -106,11 +110,16 @@ class RolloutRecorder(Recorder):
     """Logs world ``env_id`` of a ``TraversalEnv`` each control step on the ``sim_time`` timeline."""
 
     def __init__(self, path: str, env, env_id: int = 0, arrow_scale: float = 0.3):
-        scenes = getattr(env, "scenes", None)
-        obstacles = scenes.mesh_for_env(env_id) if scenes is not None else None
-        super().__init__(path, env.sim.model, env.robot.collision_geoms, obstacles, arrow_scale)
+        super().__init__(path, env.sim.model, env.robot.collision_geoms, None, arrow_scale)
         self.env, self.env_id = env, env_id
         self.step_count = 0
+        self.log_obstacles()
+
+    def log_obstacles(self) -> None:
+        """(Re-)log the obstacles of the recorded world's current scene (static)."""
+        scenes = getattr(self.env, "scenes", None)
+        if scenes is not None:
+            self.log_mesh(scenes.mesh_for_env(self.env_id))
 
     def log_step(self, env) -> None:
         """Log the current state of the recorded world."""

@@ -33,6 +33,7 @@ from cat.envs.mdp.actions import apply_actions, soft_joint_limits
 from cat.envs.robot import RobotCfg, home_qpos, load_robot_cfg
 from cat.envs.scene import COLLISION_SENSOR, build_env_model
 from cat.envs.traversal_env import SimState
+from cat.eval.metrics import TrialMetrics, horizontal_distance
 from cat.fields import FieldCfg, humanoid_pf
 from cat.terrain import Scene
 from cat.terrain.mujoco_export import add_obstacles_to_spec
@@ -66,24 +67,29 @@ class DeployCfg:
     odom_yaw_noise: float = 0.0
     """Std of the odometry yaw error [rad]."""
     start_yaw: float = 0.0
+    trial_time_s: float = 1.0e6
+    """Window of a goal's trial [s]: reaching the goal later does not count (headless: its ``time_limit``)."""
     """Heading at the start [rad] (typical scenes run along +x)."""
     seed: int = 0
 
 
 @dataclass
 class Outcome:
-    """Bookkeeping of the current goal (paper metric pieces, scored on the true root position)."""
+    """The current goal's trial, scored by the evaluation protocol's rules (``cat.eval.metrics``) on the true
+    root position, plus the number of contact onsets."""
 
     goal_set_time: float = 0.0
-    reached_time: float = float("inf")
-    min_distance: float = float("inf")
-    distance: float = float("inf")
-    collisions: int = 0  # robot-obstacle contact onsets, checked on every physics step
+    reached_time: float = float("inf")  # simulated time of the first reading within the success radius
+    min_distance: float = float("inf")  # DE: closest horizontal root-goal distance
+    distance: float = float("inf")  # horizontal root-goal distance now
+    collided: bool = False  # robot-obstacle contact at any physics step of the trial
+    collisions: int = 0  # contact onsets, checked after every physics step
     fell: bool = False
+    success: bool = False  # reached, never collided, never fell
 
     @property
     def reached(self) -> bool:
-        return np.isfinite(self.reached_time)
+        return bool(np.isfinite(self.reached_time))
 
 
 @dataclass
@@ -182,6 +188,9 @@ class Runtime:
             self.step_count = 0
             self.sim_time = 0.0
             self.outcome = Outcome()
+            self.trial: TrialMetrics | None = None
+            self._trial_steps = 0
+            self._step_contact = False
             self._prev_link_pos: torch.Tensor | None = None
             self._links_step = -1
             self._released = False
@@ -277,6 +286,10 @@ class Runtime:
             self.goals[0] = torch.tensor(goal, dtype=torch.float32)
             self.goal_version += 1
             self.outcome = Outcome(goal_set_time=self.sim_time)
+            self.trial = TrialMetrics(1, self.dt, self.task.success.radius, self.deploy.trial_time_s)
+            self._trial_steps = 0
+            self.trial.start(torch.zeros(1, dtype=torch.long), *self._readings(contact=False))
+            self._sync_outcome()
             log.info("goal set to (%.2f, %.2f)", goal[0], goal[1])
             return goal
 
@@ -307,6 +320,7 @@ class Runtime:
             scale = self.robot.action_scale
             apply_actions(self.targets, self.actions, self.policy_ids, scale, self.soft_lower, self.soft_upper)
             self.data.ctrl[:] = self.targets[0].numpy()
+            self._step_contact = False
             if not self.on_gantry:
                 for _ in range(self.robot.decimation):
                     mujoco.mj_step(self.model, self.data)
@@ -320,21 +334,34 @@ class Runtime:
     def _count_contact(self) -> None:
         if self._coll_adr is None:
             return
-        touching = self.data.sensordata[self._coll_adr] > 0
+        touching = bool(self.data.sensordata[self._coll_adr] > 0)
         if touching and not self._in_contact:
             self.outcome.collisions += 1
-        self._in_contact = bool(touching)
+        self._in_contact = touching
+        self._step_contact |= touching
+
+    def _readings(self, contact: bool) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """(distance, collision, fall) of this step for the trial metrics, on the true root position."""
+        root = torch.tensor(self.data.qpos[:2], dtype=torch.float32)
+        dist = horizontal_distance(root, torch.tensor(self.goal[:2], dtype=torch.float32)).reshape(1)
+        fall = term_terms.fallen(self) | ~torch.isfinite(self.state.root_pos).all(dim=-1)
+        return dist, torch.tensor([contact]), fall
 
     def _score(self) -> None:
-        o = self.outcome
-        if term_terms.fallen(self)[0]:
-            o.fell = True
-        if self.goal is None:
+        if self.trial is None:
+            if term_terms.fallen(self)[0]:
+                self.outcome.fell = True
             return
-        o.distance = float(np.linalg.norm(self.data.qpos[:2] - self.goal[:2]))
-        o.min_distance = min(o.min_distance, o.distance)
-        if o.distance < self.task.success.radius and not o.reached:
-            o.reached_time = self.sim_time
+        self._trial_steps += 1
+        self.trial.update(torch.tensor([self._trial_steps]), *self._readings(self._step_contact))
+        self._sync_outcome()
+
+    def _sync_outcome(self) -> None:
+        o, t = self.outcome, self.trial
+        o.distance = float(horizontal_distance(torch.tensor(self.data.qpos[:2]), torch.tensor(self.goal[:2])))
+        o.min_distance = float(t.min_dist[0])
+        o.reached_time = o.goal_set_time + float(t.reach_time[0])
+        o.collided, o.fell, o.success = bool(t.collided[0]), bool(t.fell[0]), bool(t.success()[0])
 
     # --- perception hook, views ---------------------------------------------------------------------------
     def snapshot(self) -> Snapshot:

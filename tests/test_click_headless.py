@@ -111,6 +111,7 @@ def test_policy_checkpoint_drives_robot(tmp_path, capsys):
         (["scene=flat", "checkpoint=hold", "goal=one,0"], "goal must be x,y"),
         (["scene=flat", "checkpoint=hold", "goal=40,0"], "outside the map"),
         (["checkpoint=hold"], "missing scene="),
+        (["scene=flat", "checkpoint=hold", "gaol=1,0"], "did you mean goal"),
     ],
 )
 def test_bad_input_is_one_clear_line(args, message, caplog):
@@ -126,7 +127,7 @@ def test_unreadable_checkpoint_is_one_clear_line(tmp_path, caplog):
     with caplog.at_level(logging.ERROR):
         assert main(["scene=flat", f"checkpoint={ckpt}", "goal=1,0"]) == 2
     errors = [r.getMessage() for r in caplog.records if r.levelno >= logging.ERROR]
-    assert len(errors) == 1 and "unreadable checkpoint" in errors[0], errors
+    assert len(errors) == 1 and "not a readable checkpoint" in errors[0], errors
 
 
 def test_goal_inside_obstacle_from_the_shell(tmp_path):

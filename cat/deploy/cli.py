@@ -1,19 +1,18 @@
-"""``scripts/click_and_traverse.py``: arguments, set-up and the two modes (browser, headless).
+"""``scripts/click_and_traverse.py`` on the shared command line (``cat.cli``): set-up and the two modes.
 
-Bad input (missing scene or mesh, unreadable checkpoint, a goal inside an obstacle, ...) ends with one line
-on stderr and exit code 2, no traceback.
+Bad input (missing scene or mesh, unreadable checkpoint, a goal inside an obstacle, ...) ends with one ERROR
+line on stderr and exit code 2, no traceback.
 """
 
 from __future__ import annotations
 
 import logging
-import sys
 import threading
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 import torch
-from omegaconf import OmegaConf
 
+from cat.cli import CliError, Script, dataclass_loader, run
 from cat.deploy.perception import PerceptionCfg
 from cat.deploy.policy import policy_spec
 from cat.deploy.runtime import DeployCfg, Runtime
@@ -24,13 +23,21 @@ from cat.terrain import SceneError
 
 log = logging.getLogger("click_and_traverse")
 
+DOC = """Click-and-Traverse (paper §III-C) in simulation with live perception (docs/demo.md).
+
+  python scripts/click_and_traverse.py scene=<flat|typical type|scene folder|mesh file> checkpoint=<model.pt|hold>
+      starts the browser view on http://host:port (printed); click the floor to send the G1 there.
+  ... goal=x,y [time_limit=20] [record=run.rrd]
+      headless: prints success=<0|1> time_s=<t> distance_error=<m> collisions=<n> field_updates_hz=<f>
+"""
+
 
 @dataclass
 class ClickCfg:
     scene: str = "???"  # flat | typical type (hurdle-crouch, ...) | scene folder | mesh file (OBJ/PLY/STL)
     checkpoint: str = "???"  # rsl_rl model_*.pt (config.yaml beside it) | hold (zero actions)
     goal: str = ""  # "x,y": headless, no browser
-    time_limit: float = 20.0  # headless: seconds of robot time after the goal is set
+    time_limit: float = 20.0  # headless: seconds of robot time after the goal is set (the trial window)
     record: str = ""  # headless: .rrd path for rerun
     host: str = "127.0.0.1"
     port: int = 8080
@@ -40,28 +47,11 @@ class ClickCfg:
     torch_threads: int = 1  # the control loop is tiny; more threads only contend with perception
 
 
-class UsageError(ValueError):
-    """Bad command-line arguments."""
-
-
-def parse_args(argv: list[str]) -> ClickCfg:
-    try:
-        merged = OmegaConf.merge(OmegaConf.structured(ClickCfg), OmegaConf.from_dotlist(argv))
-    except Exception as err:
-        valid = ", ".join(f.name for f in fields(ClickCfg))
-        reason = str(err).splitlines()[0]
-        raise UsageError(f"bad arguments {argv}: {reason} (valid keys: {valid})") from None
-    for key in ("scene", "checkpoint"):
-        if OmegaConf.is_missing(merged, key):
-            raise UsageError(f"missing {key}=<...> (usage: scene=<type|folder|mesh> checkpoint=<model_*.pt|hold>)")
-    return OmegaConf.to_object(merged)
-
-
 def parse_xy(text: str, name: str) -> tuple[float, float]:
     try:
         x, y = (float(v) for v in text.split(","))
     except ValueError:
-        raise UsageError(f"{name} must be x,y (two numbers), got {text!r}") from None
+        raise CliError(f"{name} must be x,y (two numbers), got {text!r}") from None
     return x, y
 
 
@@ -88,33 +78,35 @@ def run_browser(rt: Runtime, cfg: ClickCfg) -> None:
         app.stop()
 
 
-def main(argv: list[str]) -> int:
-    logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
+def job(cfg: ClickCfg) -> int:
     logging.getLogger("websockets").setLevel(logging.WARNING)
-    try:
-        cfg = parse_args(argv)
-        torch.set_num_threads(max(1, cfg.torch_threads))
-        goal = parse_xy(cfg.goal, "goal") if cfg.goal else None
-        rt = build_runtime(cfg)
-        if goal is None:
-            if cfg.record:
-                log.warning("record= is for headless runs (goal=x,y); ignored")
-            run_browser(rt, cfg)
-            return 0
-        from cat.deploy.headless import run_headless
-        from cat.deploy.record import LiveRecorder
+    torch.set_num_threads(max(1, cfg.torch_threads))
+    goal = parse_xy(cfg.goal, "goal") if cfg.goal else None
+    if cfg.time_limit <= 0:
+        raise CliError(f"time_limit must be > 0, got {cfg.time_limit}")
+    rt = build_runtime(cfg)
+    if goal is None:
+        if cfg.record:
+            log.warning("record= is for headless runs (goal=x,y); ignored")
+        run_browser(rt, cfg)
+        return 0
+    from cat.deploy.headless import run_headless
+    from cat.deploy.record import LiveRecorder
 
-        recorder = LiveRecorder(cfg.record, rt) if cfg.record else None
-        result = run_headless(rt, goal, cfg.time_limit, recorder)
-    except (UsageError, SceneError, CheckpointError, GoalError, MenagerieModelError, OSError) as err:
-        log.error("%s", err)
-        return 2
-    except ValueError as err:  # e.g. a policy whose observation a robot cannot compute
-        log.error("%s", err)
-        return 2
-    print(result.line(), flush=True)
+    recorder = LiveRecorder(cfg.record, rt) if cfg.record else None
+    print(run_headless(rt, goal, cfg.time_limit, recorder).line(), flush=True)
     return 0
 
 
-if __name__ == "__main__":
-    sys.exit(main(sys.argv[1:]))
+SCRIPT = Script(
+    name="click_and_traverse",
+    doc=DOC,
+    load=dataclass_loader(ClickCfg, required=("scene", "checkpoint")),
+    job=job,
+    keys=list(ClickCfg.__dataclass_fields__),
+    errors=(SceneError, CheckpointError, GoalError, MenagerieModelError, OSError, ValueError),
+)
+
+
+def main(argv: list[str]) -> int:
+    return run(SCRIPT, argv)

@@ -7,10 +7,7 @@ demo builds the same observation the policy was trained on.
 
 from __future__ import annotations
 
-import pickle
-import zipfile
 from dataclasses import dataclass
-from pathlib import Path
 
 import torch
 from rsl_rl.utils import resolve_class
@@ -18,7 +15,7 @@ from tensordict import TensorDict
 
 from cat.envs.config import EnvCfg
 from cat.learning.config import TrainCfg, runner_cfg
-from cat.learning.runs import CheckpointError, load_run_config
+from cat.learning.runs import CheckpointError, load_run_config, read_checkpoint, resolve_checkpoint
 
 HOLD = "hold"
 
@@ -37,11 +34,13 @@ class PolicySpec:
 
 
 def policy_spec(checkpoint: str) -> PolicySpec:
-    """Resolve ``checkpoint=``: ``hold`` or a ``model_*.pt`` with its run's ``config.yaml`` beside it."""
+    """Resolve ``checkpoint=``: ``hold``, a ``model_*.pt`` with its run's ``config.yaml`` beside it, or a run
+    folder (its latest checkpoint)."""
     if checkpoint == HOLD:
         return PolicySpec(HOLD, EnvCfg(), None)
-    run = load_run_config(checkpoint)  # CheckpointError when the file or its config.yaml is missing
-    return PolicySpec(checkpoint, run.task, run)
+    path = resolve_checkpoint(checkpoint)
+    run = load_run_config(path)  # CheckpointError when the file or its config.yaml is missing
+    return PolicySpec(str(path), run.task, run)
 
 
 class HoldPolicy:
@@ -61,13 +60,8 @@ def load_actor(spec: PolicySpec, obs: TensorDict, num_actions: int):
     a file that is not an rsl_rl checkpoint raises ``CheckpointError`` with the reason."""
     if spec.is_hold:
         return HoldPolicy(num_actions)
-    path = Path(spec.checkpoint)
-    try:
-        state = torch.load(path, map_location="cpu", weights_only=False)
-    except (OSError, RuntimeError, EOFError, pickle.UnpicklingError, zipfile.BadZipFile, ValueError) as err:
-        raise CheckpointError(f"unreadable checkpoint {path}: {type(err).__name__}: {err}") from err
-    if not isinstance(state, dict) or "actor_state_dict" not in state:
-        raise CheckpointError(f"{path} is not an rsl_rl PPO checkpoint (no actor_state_dict)")
+    path = spec.checkpoint
+    state = read_checkpoint(path)  # CheckpointError: missing, corrupt, not an rsl_rl checkpoint
     actor_class, actor_cfg = resolve_class(runner_cfg(spec.run.algo)["actor"])
     actor = actor_class(obs, {"actor": ["actor"]}, "actor", num_actions, **actor_cfg)
     try:

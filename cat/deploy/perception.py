@@ -131,7 +131,6 @@ class Perception:
         self.map = VoxelMap(map_grid, self.cfg.map)
         self._data = mujoco.MjData(model)  # this thread's own copy: never touches the simulation's data
         self.latest: LiveField | None = None
-        self.last_points = np.zeros((0, 3))
         self.stats: deque[CycleStats] = deque(maxlen=600)
         self.update_times: list[float] = []  # simulated time of the snapshot behind each field update
         self._thread: threading.Thread | None = None
@@ -153,7 +152,6 @@ class Perception:
         pos, rot = self.sensor_pose_estimate(snap.estimate)
         points = pos + scan.points_sensor() @ rot.T
         self.map.integrate(pos, points)
-        self.last_points = points
 
     def build(self, occ: np.ndarray, grid: Grid, goal: np.ndarray, version: int, stamp: float) -> LiveField | None:
         """HumanoidPF on the window for ``goal`` (or the closest free point inside the window)."""

@@ -49,7 +49,7 @@ def _toward(rt, goal) -> np.ndarray:
 
 
 @pytest.fixture()
-def browser():
+def chromium_browser():
     path = _chromium_path()
     if path is None:
         pytest.skip("Chromium cannot start: no chromium executable (apt-get install chromium)")
@@ -64,7 +64,7 @@ def browser():
     pw.stop()
 
 
-def test_click_sets_goal_and_rebuilds_field(browser):
+def test_click_sets_goal_and_rebuilds_field(chromium_browser):
     from cat.deploy.cli import ClickCfg, build_runtime
     from cat.deploy.viewer import ClickApp, ViewerCfg
 
@@ -77,7 +77,7 @@ def test_click_sets_goal_and_rebuilds_field(browser):
         _wait(lambda: rt.used_field is not None and rt.used_field.goal_version == rt.goal_version, 60, "first field")
         assert _root_direction(rt) @ _toward(rt, first) > 0.9
 
-        page = browser.new_page(viewport={"width": 1280, "height": 720})
+        page = chromium_browser.new_page(viewport={"width": 1280, "height": 720})
         page.goto(app.url)
         page.get_by_text("Click the floor").wait_for(timeout=60_000)  # GUI synced: the client is connected
         _wait(lambda: len(app.server.get_clients()) > 0, 30, "the viser client")

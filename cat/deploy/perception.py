@@ -19,7 +19,6 @@ from dataclasses import dataclass, field
 
 import mujoco
 import numpy as np
-import torch
 
 from cat.deploy.kinematics import RobotFK
 from cat.deploy.lidar import Lidar, LidarCfg
@@ -159,13 +158,7 @@ class Perception:
         for attempt in range(2):
             try:
                 f = build_field(occ, grid, sub, self.field_cfg)
-                bank = FieldBank(  # a one-field bank over the field's own array (no copy)
-                    torch.from_numpy(f.data)[None],
-                    torch.tensor(np.asarray([grid.origin])),
-                    grid.voxel,
-                    torch.tensor(np.asarray([sub])),
-                )
-                return LiveField(bank, grid, np.asarray(goal), sub, version, stamp, occ)
+                return LiveField(FieldBank.from_fields([f]), grid, np.asarray(goal), sub, version, stamp, occ)
             except ValueError as err:  # subgoal in an occupied voxel: move it to free space once
                 free = nearest_free(occ, grid, sub) if attempt == 0 else None
                 if free is None:

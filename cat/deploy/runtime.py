@@ -30,6 +30,8 @@ from cat.envs.math_utils import yaw_from_quat, yaw_quat
 from cat.envs.mdp import observations as obs_terms
 from cat.envs.mdp import terminations as term_terms
 from cat.envs.mdp.actions import apply_actions, soft_joint_limits
+from cat.envs.mdp.field_obs import field_obs
+from cat.envs.obs_groups import lookup_term, resolve_groups
 from cat.envs.robot import RobotCfg, home_qpos, load_robot_cfg
 from cat.envs.scene import COLLISION_SENSOR, build_env_model
 from cat.envs.traversal_env import SimState
@@ -122,9 +124,14 @@ class Runtime:
         self.scene, self.spec = scene, spec
         self.cfg: EnvCfg = spec.task  # named as in the env: the shared term functions read ``env.cfg``
         self.task = self.cfg
-        bad = [t for t in self.task.observations.actor if t not in DEPLOYABLE_TERMS]
+        groups = resolve_groups(self.task.observations)
+        if "actor" not in groups:
+            raise ValueError(f"the policy's task has no 'actor' observation group (groups: {', '.join(groups)})")
+        self.actor_terms = groups["actor"]
+        bad = [t for t in self.actor_terms if t not in DEPLOYABLE_TERMS]
         if bad:
-            raise ValueError(f"the policy observes {bad}, which a deployed robot cannot compute")
+            raise ValueError(f"the policy observes {bad}, which this deployed robot does not compute")
+        self._actor_fns = [lookup_term(obs_terms, t, "observation") for t in self.actor_terms]
         self.robot = robot or load_robot_cfg()
         self.field_cfg = field_cfg or FieldCfg()
         has_obstacles = len(scene.mesh.faces) > 0
@@ -270,11 +277,11 @@ class Runtime:
         self.f_h = f_h
         self.used_field = live
         if self.task.field_obs.enabled:
-            self.field_obs_buf = obs_terms.field_obs(st.yaw, f_h, grad, sdf, self.task.field_obs)
+            self.field_obs_buf = field_obs(st.yaw, f_h, grad, sdf, self.task.field_obs)
 
     def observation(self) -> TensorDict:
         """The ``actor`` group exactly as the env concatenates it (without training noise)."""
-        terms = [getattr(obs_terms, name)(self) for name in self.task.observations.actor]
+        terms = [fn(self) for fn in self._actor_fns]
         return TensorDict({"actor": torch.cat(terms, dim=-1)}, batch_size=[1])
 
     # --- goals ----------------------------------------------------------------------------------------------

@@ -109,3 +109,29 @@ def test_every_script_helps_and_suggests(tmp_path, caplog, capsys, name, key):
         assert mod.run(mod.SCRIPT, [f"{key}x=1"]) == 2
     errors = [r.getMessage() for r in caplog.records if r.levelno >= logging.ERROR]
     assert len(errors) == 1 and f"did you mean {key}" in errors[0], errors
+
+
+@pytest.fixture(scope="module")
+def tiny_run(tmp_path_factory):
+    from cat.learning.hydra_cfg import load_config
+    from cat.learning.runs import train
+
+    return train(load_config([*SMALL, f"run_root={tmp_path_factory.mktemp('runs')}"]))
+
+
+@pytest.mark.parametrize(
+    "args, needle",
+    [
+        (["episodes=0"], "episodes must be >= 1"),
+        (["num_envs=0"], "num_envs must be >= 1"),
+        (["sim=warpp"], "unknown sim backend 'warpp'"),
+        (["record=/no/such/folder/x.rrd"], "does not exist"),
+        (["time_s=0"], "time_s must be > 0"),
+    ],
+)
+def test_play_refuses_bad_values(tiny_run, caplog, args, needle):
+    mod = _script("play")
+    with caplog.at_level(logging.ERROR):
+        code = mod.main([f"checkpoint={tiny_run}", *args])
+    errors = [r.getMessage() for r in caplog.records if r.levelno >= logging.ERROR]
+    assert code == 2 and len(errors) == 1 and needle in errors[0], errors

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, replace
+from pathlib import Path
 
 from tqdm import tqdm
 
@@ -25,7 +26,7 @@ log = logging.getLogger(__name__)
 class PlayCfg:
     checkpoint: str = "???"  # model_<it>.pt, or a run folder (its latest checkpoint)
     episodes: int = 10  # trials
-    num_envs: int = 0  # 0 = min(episodes, 64)
+    num_envs: int | None = None  # parallel trials; default min(episodes, 64)
     sim: str = ""  # override the run's backend
     seed: int = 0  # start-pose seed of the trials (not the run's RL seed)
     scene_seed: int | None = None  # typical scenes: override the run's task.scene_seed
@@ -44,6 +45,10 @@ def play(cfg: PlayCfg) -> Summary:
     group = run_scene_group(task, cfg.scene_seed, cfg.scene_dir)
     if cfg.time_s <= 0:
         raise ValueError(f"time_s must be > 0, got {cfg.time_s}")
+    if cfg.num_envs is not None and cfg.num_envs < 1:
+        raise ValueError(f"num_envs must be >= 1 (or left out for min(episodes, 64)), got {cfg.num_envs}")
+    if cfg.record and not Path(cfg.record).resolve().parent.is_dir():
+        raise ValueError(f"record={cfg.record}: folder {Path(cfg.record).resolve().parent} does not exist")
     opts = EvalCfg(seed=cfg.seed, success=replace(EvalCfg().success, time_s=cfg.time_s))
     yaw = opts.start_yaw_range
     if group is None:
@@ -51,7 +56,7 @@ def play(cfg: PlayCfg) -> Summary:
     else:
         pairs = sum(len(s.goals) for s in group.scenes)
         trials = first_trials(lambda k: scene_trials(group.scenes, k, cfg.seed, yaw), cfg.episodes, pairs)
-    n = cfg.num_envs or min(cfg.episodes, 64)
+    n = cfg.num_envs if cfg.num_envs is not None else min(cfg.episodes, 64)
     env = make_eval_env(task, group, n, opts, sim=cfg.sim or run_cfg.sim.backend, device=run_cfg.sim.device)
     policy = load_policy(cfg.checkpoint, env, run_cfg)
     on_step = None

@@ -54,7 +54,7 @@ class TrainCfg:
     max_minutes: float = 0.0  # > 0: stop cleanly after this much wall-clock, save, and resume later
     seed: int = 0
     verbose: bool = False  # rsl_rl's per-iteration console block and network printout instead of one log line
-    torch_threads: int = 1  # torch intra-op threads (0: torch's default); MuJoCo's own workers use every core
+    torch_threads: int = 0  # torch intra-op threads (0: torch's default); 1 when other work shares the cores
     init: str | None = None  # checkpoint whose policy/critic weights initialise this run
     resume: str | None = None  # checkpoint to continue, in its own run folder (optimiser, iteration, RNG, curriculum)
     run_root: str = "runs"  # runs go to <run_root>/<task>/<time>[_<run_name>]

@@ -25,7 +25,7 @@ from cat.deploy.perception import LiveField, Perception, PerceptionCfg, RobotEst
 from cat.deploy.policy import PolicySpec, load_actor
 from cat.deploy.scenes import GoalChecker
 from cat.deploy.voxel_map import map_grid
-from cat.envs.config import EnvCfg
+from cat.envs.config import ACTOR_TERMS, EnvCfg
 from cat.envs.math_utils import yaw_from_quat, yaw_quat
 from cat.envs.mdp import observations as obs_terms
 from cat.envs.mdp import terminations as term_terms
@@ -42,18 +42,8 @@ from cat.terrain.mujoco_export import add_obstacles_to_spec
 
 log = logging.getLogger(__name__)
 
-DEPLOYABLE_TERMS = (
-    "gyro",
-    "projected_gravity",
-    "joint_pos",
-    "joint_vel",
-    "last_action",
-    "leg_targets",
-    "goal_command",
-    "gait_phase",
-    "field_block",
-)
-"""Actor terms a robot can compute; a checkpoint whose actor reads anything else is refused."""
+DEPLOYABLE_TERMS = ACTOR_TERMS
+"""Actor terms a robot can compute (the default actor group is exactly that); others are refused."""
 
 
 @dataclass

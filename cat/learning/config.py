@@ -15,10 +15,39 @@ class SimCfg:
     device: str = "cpu"  # torch device of the env tensors (cuda:0 needs sim=warp)
 
 
+ALGOS = ("ppo", "distill")
+STUDENT_MODELS = ("mlp", "lstm")
+
+
+@dataclass
+class DistillCfg:
+    """Multi-teacher DAgger (``algo=distill``, rsl_rl ``Distillation``): the student acts, each env's specialist
+    labels. The student reads the env groups ``student_groups``; teachers read ``teacher_groups`` (each
+    teacher checkpoint's actor layout must match them), routed by ``route_group`` (``scene_group`` term)."""
+
+    student: str = "mlp"  # mlp (history in the observation) | lstm (rsl_rl RNNModel)
+    hidden_dims: list[int] = field(default_factory=lambda: [256, 128, 64])
+    rnn_type: str = "lstm"
+    rnn_hidden_dim: int = 256
+    rnn_num_layers: int = 1
+    init_noise_std: float = 0.1  # the acting student's exploration noise: DAgger visits the student's own states
+    learning_rate: float = 1.0e-3
+    num_learning_epochs: int = 1
+    gradient_length: int = 24  # steps of truncated backprop per gradient step (divides epochs x num_steps_per_env)
+    loss_type: str = "mse"  # mse | huber
+    max_grad_norm: float = 1.0
+    student_groups: list[str] = field(default_factory=lambda: ["student"])
+    teacher_groups: list[str] = field(default_factory=lambda: ["teacher"])
+    route_group: str = "route"
+
+
 @dataclass
 class AlgoCfg:
-    """PPO (rsl_rl) settings; defaults follow the authors' release where known."""
+    """PPO (rsl_rl) settings; defaults follow the authors' release where known. ``name=distill`` trains a
+    student by DAgger instead (``distill``; PPO's policy settings then describe nothing)."""
 
+    name: str = "ppo"  # ppo | distill
+    distill: DistillCfg = field(default_factory=DistillCfg)
     num_steps_per_env: int = 24
     learning_rate: float = 3.0e-4
     gamma: float = 0.97
@@ -60,6 +89,7 @@ class TrainCfg:
     run_root: str = "runs"  # runs go to <run_root>/<task>/<time>[_<run_name>]
     run_name: str = ""
     run_dir: str | None = None  # exact run folder instead (hydra.run.dir=...; must not exist or be empty)
+    teachers: list[str] = field(default_factory=list)  # algo=distill: specialist checkpoints, one per scene group
 
 
 def _symmetry_cfg(algo: AlgoCfg) -> dict[str, Any] | None:
@@ -133,3 +163,47 @@ def runner_cfg(algo: AlgoCfg, env_groups: Iterable[str] | None = None) -> dict[s
             "obs_normalization": algo.obs_normalization,
         },
     }
+
+
+def student_model_cfg(d: DistillCfg, activation: str = "elu", obs_normalization: bool = True) -> dict[str, Any]:
+    """rsl_rl class config of the distilled student (``MLPModel`` or ``RNNModel``)."""
+    if d.student not in STUDENT_MODELS:
+        raise ValueError(f"algo.distill.student={d.student!r}; valid: {', '.join(STUDENT_MODELS)}")
+    cfg: dict[str, Any] = {
+        "class_name": "MLPModel" if d.student == "mlp" else "RNNModel",
+        "hidden_dims": list(d.hidden_dims),
+        "activation": activation,
+        "obs_normalization": obs_normalization,
+        "distribution_cfg": {"class_name": "GaussianDistribution", "init_std": d.init_noise_std},
+    }
+    if d.student == "lstm":
+        cfg.update(rnn_type=d.rnn_type, rnn_hidden_dim=d.rnn_hidden_dim, rnn_num_layers=d.rnn_num_layers)
+    return cfg
+
+
+@dataclass
+class PolicyModel:
+    """The network that acts at deployment: PPO's actor or the distilled student."""
+
+    class_cfg: dict[str, Any]  # rsl_rl resolve_class config (class_name + kwargs)
+    obs_set: str  # "actor" | "student"
+    obs_groups: list[str]  # env observation groups it reads, concatenated in order
+    state_key: str  # its entry in the checkpoint dict
+
+    def build(self, obs, num_actions: int):
+        """An untrained instance for observations shaped like ``obs`` (a TensorDict of the env's groups)."""
+        from rsl_rl.utils import resolve_class
+
+        cls, kwargs = resolve_class(dict(self.class_cfg))
+        return cls(obs, {self.obs_set: list(self.obs_groups)}, self.obs_set, num_actions, **kwargs)
+
+
+def policy_model(algo: AlgoCfg) -> PolicyModel:
+    """Which network of a run's checkpoint is its policy, how to build it, and what it reads."""
+    if algo.name == "ppo":
+        return PolicyModel(runner_cfg(algo)["actor"], "actor", list(algo.obs_groups["actor"]), "actor_state_dict")
+    if algo.name == "distill":
+        d = algo.distill
+        cfg = student_model_cfg(d, algo.activation, algo.obs_normalization)
+        return PolicyModel(cfg, "student", list(d.student_groups), "student_state_dict")
+    raise ValueError(f"algo.name={algo.name!r}; valid: {', '.join(ALGOS)}")

@@ -30,7 +30,8 @@ class CheckpointError(FileNotFoundError):
 
 
 def read_checkpoint(path: str | os.PathLike) -> dict:
-    """A PPO checkpoint's dict, or ``CheckpointError`` naming the file (missing, corrupt, not rsl_rl's)."""
+    """A PPO or distillation checkpoint's dict, or ``CheckpointError`` naming the file (missing, corrupt, not
+    rsl_rl's)."""
     path = Path(path)
     if not path.is_file():
         raise CheckpointError(f"checkpoint not found: {path}")
@@ -38,8 +39,8 @@ def read_checkpoint(path: str | os.PathLike) -> dict:
         ckpt = torch.load(path, map_location="cpu", weights_only=False)
     except Exception as err:  # pickle / zip / EOF errors of a damaged or foreign file
         raise CheckpointError(f"{path}: not a readable checkpoint ({type(err).__name__}: {err})") from None
-    if not isinstance(ckpt, dict) or "actor_state_dict" not in ckpt:
-        raise CheckpointError(f"{path}: not an rsl_rl PPO checkpoint (no actor_state_dict)")
+    if not isinstance(ckpt, dict) or not ({"actor_state_dict", "student_state_dict"} & set(ckpt)):
+        raise CheckpointError(f"{path}: not an rsl_rl checkpoint (no actor_state_dict or student_state_dict)")
     return ckpt
 
 

@@ -33,7 +33,7 @@ SCRIPT = Script(
     job=_job,
     run_dir_key="run_dir",
     groups={g: _options(g) for g in ("task", "sim", "algo", "method")},
-    keys=["num_envs", "max_iterations", "max_minutes", "seed", "init", "resume", "run_name", "verbose"],
+    keys=["num_envs", "max_iterations", "max_minutes", "seed", "init", "resume", "teachers", "run_name", "verbose"],
     errors=(CheckpointError, ValueError),
 )
 

@@ -52,11 +52,14 @@ class ObsGroupCfg:
 
     ``extends`` names another group whose (resolved) terms come first, so a critic or teacher follows its actor
     when a method swaps an actor term. ``noise`` adds ``NoiseCfg``'s per-term noise (when ``noise.enabled``).
+    ``history`` > 1 stacks the group's whole vector over the last ``history`` control steps, oldest first
+    (filled with the current value at reset): a deployable student's short proprioceptive memory.
     """
 
     terms: list[str] = field(default_factory=list)
     extends: str = ""
     noise: bool = False
+    history: int = 1
 
 
 def default_obs_groups() -> dict[str, ObsGroupCfg]:
@@ -210,6 +213,9 @@ class EnvCfg:
     episode_length_s: float = 20.0
     scene_dir: str | None = None  # folder of scene folders (scripts/gen_scenes.py); None: see scene_kind
     scene_kind: str | None = None  # keep only scenes of this kind; with no scene_dir, build its typical variants
+    # with no scene_dir: typical kinds mixed in one scene set (scene_variants of each); each kind is a scene group,
+    # taught by its own specialist in distillation (algo=distill). Overrides scene_kind.
+    scene_groups: list[str] = field(default_factory=list)
     scene_variants: int = 10  # typical variants built when scene_dir is None (difficulty spread over [0, 1])
     scene_seed: int = 0  # seed of the typical variants (seeds scene_seed..+variants-1); not the RL seed
     action_clip: float = 1.0

@@ -4,7 +4,8 @@ change config.
 
 A group's terms are the functions of ``cat.envs.mdp.observations`` named in its list, concatenated in order,
 after the resolved terms of the group it ``extends``. Every term is evaluated once per step and shared by the
-groups that list it; groups with ``noise: true`` add ``NoiseCfg``'s per-term noise to their copy.
+groups that list it; groups with ``noise: true`` add ``NoiseCfg``'s per-term noise to their copy. A group with
+``history: H`` > 1 reads its last H vectors (noisy as observed), oldest first.
 """
 
 from __future__ import annotations
@@ -84,6 +85,17 @@ class ObservationGroups:
         self.noisy = {name: bool(g.noise) for name, g in cfg.observations.items()}
         names = dict.fromkeys(t for terms in self.groups.values() for t in terms)
         self.fns = {t: lookup_term(module, t, "observation") for t in names}
+        self.history = {name: int(g.history) for name, g in cfg.observations.items()}
+        for name, h in self.history.items():
+            if h < 1:
+                raise ValueError(f"observation group {name!r} has history={h}; must be >= 1")
+        self.buffers: dict[str, torch.Tensor] = {}  # group -> (n, H, D) for groups with history > 1
+        self._fresh: torch.Tensor | None = None  # envs whose history restarts at the next compute
+
+    def reset(self, env_ids: torch.Tensor) -> None:
+        """Restart the history of ``env_ids`` (filled with their next observation)."""
+        if self._fresh is not None:
+            self._fresh[env_ids] = True
 
     def uses(self, *terms: str) -> bool:
         """Whether any group lists one of ``terms``."""
@@ -104,8 +116,33 @@ class ObservationGroups:
                 if self.noisy[group] and noise.enabled and scale > 0:
                     value = _noisy(name, value, scale)
                 parts.append(value)
-            out[group] = torch.cat(parts, dim=-1)
+            out[group] = self._stack(group, torch.cat(parts, dim=-1))
+        if self._fresh is not None:
+            self._fresh[:] = False
         return TensorDict(out, batch_size=[env.num_envs], device=env.device)
+
+    def _stack(self, group: str, value: torch.Tensor) -> torch.Tensor:
+        h = self.history[group]
+        if h == 1:
+            return value
+        buf = self.buffers.get(group)
+        if buf is None:  # first compute: every env starts its history here
+            if self._fresh is None:
+                self._fresh = torch.zeros(value.shape[0], dtype=torch.bool, device=value.device)
+            buf = value[:, None].repeat(1, h, 1)
+        else:
+            buf = torch.cat((buf[:, 1:], value[:, None]), dim=1)
+            fresh = self._fresh
+            buf[fresh] = value[fresh][:, None].expand(-1, h, -1)
+        self.buffers[group] = buf
+        return buf.flatten(1)
+
+    def state_dict(self) -> dict[str, torch.Tensor]:
+        """History buffers (empty when no group has history): part of the env snapshot."""
+        return {k: v.clone() for k, v in self.buffers.items()}
+
+    def load_state_dict(self, state: dict[str, torch.Tensor]) -> None:
+        self.buffers = {k: v.clone() for k, v in state.items()}
 
 
 def _noisy(name: str, value: torch.Tensor, scale: float) -> torch.Tensor:
@@ -120,6 +157,9 @@ def group_layout(task: EnvCfg, group: str = "actor") -> tuple:
     live, and the perception grid sizes of the map terms it lists (a checkpoint plays only on its own layout)."""
     terms = resolve_groups(task.observations).get(group, [])
     layout: tuple = (tuple(terms), bool(task.field_obs.enabled))
+    history = task.observations[group].history if group in task.observations else 1
+    if history > 1:
+        layout += (("history", history),)
     if {"elevation_map", "ground_map", "overhead_map"} & set(terms):
         hm = task.perception.height_map
         layout += (("height_map", hm.length, hm.width, hm.resolution, hm.forward_offset),)

@@ -100,6 +100,9 @@ class SceneSet:
 
         self.bank = FieldBank.build(layouts, checked, self.offsets, dtype=dtype, device=self.device)
         self.scene_of_env = torch.arange(num_envs) % len(scenes)
+        # scene groups: one per scene kind, in order of first appearance (distillation routes envs by group)
+        self.group_names = list(dict.fromkeys(s.kind for s in scenes))
+        self.group_of_scene = torch.tensor([self.group_names.index(s.kind) for s in scenes])
         self._goal_idx = torch.zeros(num_envs, dtype=torch.long)
 
     # --- construction -------------------------------------------------------------------------------------
@@ -144,15 +147,17 @@ class SceneSet:
     @classmethod
     def typical(
         cls,
-        kind: str,
+        kind: str | Sequence[str],
         num_envs: int,
         variants: int = 10,
         seed: int = 0,
         device: str = "cpu",
         field_cfg: FieldCfg | None = None,
     ) -> SceneSet:
-        """The paper's typical scenes of ``kind`` built on the fly (no dataset needed)."""
-        scenes = typical_variants(kind, variants, seed)
+        """The paper's typical scenes of ``kind`` (or of each of several kinds: one scene group per kind)
+        built on the fly (no dataset needed)."""
+        kinds = [kind] if isinstance(kind, str) else list(kind)
+        scenes = [s for k in kinds for s in typical_variants(k, variants, seed)]
         return cls(scenes, lambda i: scene_fields(scenes[i], None, field_cfg), num_envs, device)
 
     # --- env hooks ----------------------------------------------------------------------------------------
@@ -206,6 +211,10 @@ class SceneSet:
             goal[j] = torch.from_numpy(scene.goals[g] + off)
         delta = goal[:, :2] - start[:, :2]
         return start, goal, torch.atan2(delta[:, 1], delta[:, 0])
+
+    def groups_of_envs(self) -> torch.Tensor:
+        """(num_envs,) scene-group index of each env's current scene (index into ``group_names``)."""
+        return self.group_of_scene[self.scene_of_env]
 
     def field_ids(self, env_ids: torch.Tensor) -> torch.Tensor:
         ids = env_ids.cpu()

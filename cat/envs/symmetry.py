@@ -83,6 +83,7 @@ def term_mirror(env: TraversalEnv, term: str) -> tuple[list[int], list[float]]:
         "link_positions": _links(links, POLAR),
         "foot_contacts": ([1, 0], [1.0, 1.0]),
         "dr_scales": ([0, 1, 2], [1.0, 1.0, 1.0]),
+        "scene_group": ([0], [1.0]),
         "elevation_map": grid_mirror(map_shape(env.cfg.perception.height_map), layers=2),
         "ground_map": grid_mirror(map_shape(env.cfg.perception.height_map)),
         "overhead_map": grid_mirror(map_shape(env.cfg.perception.height_map)),
@@ -111,7 +112,9 @@ class MirrorMap:
                 perm += [offset + i for i in p]
                 sign += s
                 offset += len(p)
-            groups[group] = (torch.tensor(perm, device=dev), torch.tensor(sign, device=dev))
+            h = env.observation_groups.history[group]  # a stacked history mirrors step by step
+            perm = [k * offset + i for k in range(h) for i in perm]
+            groups[group] = (torch.tensor(perm, device=dev), torch.tensor(sign * h, device=dev))
         legs = [env.robot.joint_names[i] for i in env.robot.policy_joint_ids]
         p, s = joint_mirror(legs)
         return cls(groups, (torch.tensor(p, device=dev), torch.tensor(s, device=dev)))

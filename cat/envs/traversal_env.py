@@ -320,6 +320,11 @@ class TraversalEnv(VecEnv):
         return out
 
     @property
+    def scene_group_names(self) -> list[str]:
+        """Scene groups (kinds) of the env's scene set, in ``scene_group`` index order; ``["flat"]`` without one."""
+        return ["flat"] if self.scenes is None else list(self.scenes.group_names)
+
+    @property
     def mirror_map(self):
         """Left/right mirror of every observation group and the actions (``cat.envs.symmetry``), built once."""
         if self._mirror_map is None:
@@ -355,6 +360,8 @@ class TraversalEnv(VecEnv):
         snap["common_step"] = self.common_step
         snap["sim"] = self.sim.get_state()
         snap["obs"] = self.obs_buf.clone()
+        if self.observation_groups.buffers:  # groups with history (absent otherwise: older snapshots stay valid)
+            snap["obs_history"] = self.observation_groups.state_dict()
         if self.scenes is not None:
             snap["scene_of_env"] = self.scenes.scene_of_env.clone()
             snap["goal_idx"] = self.scenes._goal_idx.clone()
@@ -389,6 +396,8 @@ class TraversalEnv(VecEnv):
         self._update_state()
         self._update_field()
         self.obs_buf = snap["obs"].clone()
+        if "obs_history" in snap:
+            self.observation_groups.load_state_dict(snap["obs_history"])
 
     # --- resets ------------------------------------------------------------------------------------------
     def reset_idx(self, env_ids: torch.Tensor) -> None:
@@ -465,6 +474,7 @@ class TraversalEnv(VecEnv):
         self.push_timer[env_ids] = uniform(*self.cfg.push.interval_s, k)
         for v in self.episode_sums.values():
             v[env_ids] = 0.0
+        self.observation_groups.reset(env_ids)
         if self.scenes is not None:
             self.field_source.assign(env_ids, self.scenes.field_ids(env_ids))
         if self.field is not None:

@@ -24,7 +24,7 @@ from pathlib import Path
 import yaml
 
 from cat.envs.obs_groups import group_layout
-from cat.learning.config import TrainCfg
+from cat.learning.config import TrainCfg, policy_model
 from cat.learning.runs import CheckpointError, load_run_config
 
 HOLD = "hold"
@@ -54,9 +54,9 @@ class Manifest:
 
 
 def obs_layout(cfg: TrainCfg) -> tuple:
-    """What fixes the policy's input: the actor group's terms, in order, whether the field block is live, and the
-    grid sizes of its map terms (``cat.envs.obs_groups.group_layout``)."""
-    return group_layout(cfg.task, "actor")
+    """What fixes the policy's input: per group it reads (PPO's actor or the distilled student), the terms in
+    order, whether the field block is live, and the grid sizes of its map terms (``group_layout``)."""
+    return tuple(group_layout(cfg.task, g) for g in policy_model(cfg.algo).obs_groups)
 
 
 def load_manifest(path: str | os.PathLike) -> Manifest:

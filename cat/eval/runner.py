@@ -187,6 +187,8 @@ def _run_batches(env, policy, trials, seed, steps, results, progress, on_step) -
         env.generator.manual_seed(seed * 1_000_003 + b)  # reset draws, per batch
         torch.manual_seed(seed * 1_000_003 + b)  # observation noise
         place(env, ids, batch)
+        if hasattr(policy, "reset"):
+            policy.reset()  # a recurrent policy starts each batch of trials with no memory
         obs = env.get_observations()
         if on_step is not None:
             on_step(env)

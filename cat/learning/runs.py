@@ -12,13 +12,14 @@ from pathlib import Path
 import torch
 import yaml
 from omegaconf import OmegaConf
-from rsl_rl.runners import OnPolicyRunner
+from rsl_rl.runners import DistillationRunner, OnPolicyRunner
 
 import cat
 from cat.envs.obs_groups import resolve_groups, upgrade_legacy_observations
 from cat.envs.sim import BACKENDS
 from cat.envs.traversal_env import TraversalEnv
-from cat.learning.config import TrainCfg, check_obs_groups, runner_cfg
+from cat.learning.config import ALGOS, TrainCfg, check_obs_groups, policy_model, runner_cfg, student_model_cfg
+from cat.learning.distill import check_teachers, distill_runner_cfg, load_specialists
 from cat.learning.progress import BudgetReached, install_iteration_hook, quiet_constructor
 from cat.terrain import TYPICAL_KINDS
 
@@ -60,10 +61,12 @@ def make_env(cfg: TrainCfg, num_envs: int | None = None) -> TraversalEnv:
     n = num_envs or cfg.num_envs or cfg.task.num_envs
     task = replace(cfg.task, num_envs=n)
     scenes = None
-    if task.scene_dir or task.scene_kind:
+    if task.scene_dir or task.scene_kind or task.scene_groups:
         from cat.envs.scene_set import SceneSet
 
-        if task.scene_dir:
+        if task.scene_groups and not task.scene_dir:
+            scenes = SceneSet.typical(task.scene_groups, n, task.scene_variants, task.scene_seed, device=cfg.sim.device)
+        elif task.scene_dir:
             scenes = SceneSet.from_dir(task.scene_dir, num_envs=n, device=cfg.sim.device, kind=task.scene_kind)
         else:
             scenes = SceneSet.typical(task.scene_kind, n, task.scene_variants, task.scene_seed, device=cfg.sim.device)
@@ -117,9 +120,41 @@ def validate_train_cfg(cfg: TrainCfg) -> None:
                 f"task.scene_kind={cfg.task.scene_kind!r} without task.scene_dir must be a typical kind: "
                 f"{', '.join(TYPICAL_KINDS)}"
             )
+    cfg.task.scene_groups = [k.replace("_", "-") for k in cfg.task.scene_groups]
+    for kind in cfg.task.scene_groups:
+        if cfg.task.scene_dir:
+            raise ValueError("task.scene_groups builds typical scenes: it cannot be used with task.scene_dir")
+        if kind not in TYPICAL_KINDS:
+            raise ValueError(f"task.scene_groups has {kind!r}; typical kinds: {', '.join(TYPICAL_KINDS)}")
     if cfg.task.episode_length_s <= 0:
         raise ValueError(f"task.episode_length_s={cfg.task.episode_length_s}: must be > 0")
-    check_obs_groups(cfg.algo.obs_groups, resolve_groups(cfg.task.observations))  # names, before any env is built
+    env_groups = resolve_groups(cfg.task.observations)
+    check_obs_groups(cfg.algo.obs_groups, env_groups)  # names, before any env is built
+    if cfg.algo.name not in ALGOS:
+        raise ValueError(f"algo.name={cfg.algo.name!r}; valid: {', '.join(ALGOS)}")
+    if cfg.algo.name == "distill":
+        d = cfg.algo.distill
+        student_model_cfg(d)  # checks algo.distill.student
+        for key, groups in (("student_groups", d.student_groups), ("teacher_groups", d.teacher_groups)):
+            for g in groups or [None]:
+                if g not in env_groups:
+                    raise ValueError(
+                        f"algo.distill.{key} names observation group {g!r} that the env does not build; "
+                        f"groups (task.observations): {', '.join(env_groups)}"
+                    )
+        if d.route_group not in env_groups or env_groups[d.route_group] != ["scene_group"]:
+            raise ValueError(
+                f"algo.distill.route_group={d.route_group!r} must be an observation group of exactly the "
+                "scene_group term (task.observations)"
+            )
+        if not cfg.teachers:
+            raise ValueError("algo=distill needs teachers=[<specialist checkpoint>,...]")
+        if cfg.init:
+            raise ValueError("init= initialises PPO runs; a distillation starts its student fresh (or resume=)")
+        if cfg.algo.symmetry_augment or cfg.algo.mirror_loss_coeff > 0:
+            raise ValueError("rsl_rl's Distillation rejects symmetry: set algo.symmetry_augment=false")
+    elif cfg.teachers:
+        raise ValueError("teachers= is for algo=distill")
     if cfg.sim.backend not in BACKENDS:
         raise ValueError(f"unknown sim backend {cfg.sim.backend!r}; valid: {', '.join(BACKENDS)}")
     for path in (cfg.init, cfg.resume):
@@ -185,6 +220,15 @@ def resume_config(checkpoint: str | os.PathLike, overrides: list[str]) -> TrainC
     return OmegaConf.to_object(merged)
 
 
+def make_runner(cfg: TrainCfg, env: TraversalEnv, log_dir: str | None) -> OnPolicyRunner:
+    """rsl_rl's PPO runner, or for ``algo=distill`` its ``DistillationRunner`` with the multi-teacher loaded."""
+    if cfg.algo.name == "distill":
+        runner = DistillationRunner(env, distill_runner_cfg(cfg, env.scene_group_names), log_dir, str(env.device))
+        runner.alg.teacher_loaded = True  # MultiTeacher loaded and checked every specialist on construction
+        return runner
+    return OnPolicyRunner(env, runner_cfg(cfg.algo, env.obs_groups), log_dir=log_dir, device=str(env.device))
+
+
 def _training_state(env: TraversalEnv) -> dict:
     """What a resumed run needs beyond rsl_rl's checkpoint: RNG streams (and the env's curriculum)."""
     return {"torch_rng": torch.get_rng_state(), "env_rng": env.generator.get_state(), **env.training_state()}
@@ -236,6 +280,8 @@ def train(cfg: TrainCfg) -> Path:
     torch.manual_seed(cfg.seed)
     set_torch_threads(cfg.torch_threads)
     env = make_env(cfg)  # before any folder exists: a bad scene or model leaves nothing behind
+    if cfg.algo.name == "distill":
+        check_teachers(load_specialists(list(cfg.teachers)), cfg, env.scene_group_names)
     run_dir = Path(cfg.resume).parent if cfg.resume else new_run_dir(cfg)
     try:
         return _train_in(cfg, env, run_dir)
@@ -249,7 +295,7 @@ def _train_in(cfg: TrainCfg, env: TraversalEnv, run_dir: Path) -> Path:
     save_config(cfg, run_dir)
     log.info("run folder: %s", run_dir)
     with quiet_constructor(cfg.verbose):
-        runner = OnPolicyRunner(env, runner_cfg(cfg.algo, env.obs_groups), log_dir=str(run_dir), device=str(env.device))
+        runner = make_runner(cfg, env, str(run_dir))
     runner.logger.git_status_repos = [cat.__file__]  # record this project's commit and diff in <run>/git/
     if cfg.resume:
         _restore_training_state(runner, env, cfg.resume, runner.load(cfg.resume))
@@ -284,10 +330,22 @@ def _train_in(cfg: TrainCfg, env: TraversalEnv, run_dir: Path) -> Path:
 
 
 def load_policy(checkpoint: str | os.PathLike, env: TraversalEnv, cfg: TrainCfg):
-    """Deterministic inference policy of a PPO checkpoint for ``env``."""
-    runner = OnPolicyRunner(env, runner_cfg(cfg.algo, env.obs_groups), log_dir=None, device=str(env.device))
+    """Deterministic inference policy of a checkpoint (PPO actor or distilled student) for ``env``: called on the
+    env's observation ``TensorDict``; ``reset()`` clears a recurrent student's memory."""
+    model = policy_model(cfg.algo)
+    missing = [g for g in model.obs_groups if g not in env.obs_groups]
+    if missing:
+        raise CheckpointError(
+            f"checkpoint {checkpoint} reads observation group {missing[0]!r} that this env does not build "
+            f"(groups: {', '.join(env.obs_groups)})"
+        )
+    state = read_checkpoint(checkpoint)
+    if model.state_key not in state:
+        raise CheckpointError(f"checkpoint {checkpoint} has no {model.state_key} (its config says {cfg.algo.name})")
+    with quiet_constructor(False):
+        policy = model.build(env.get_observations(), env.num_actions).to(env.device)
     try:
-        runner.load(str(checkpoint), load_cfg={"actor": True}, strict=True)
+        policy.load_state_dict(state[model.state_key], strict=True)
     except (RuntimeError, KeyError) as err:
         raise CheckpointError(f"checkpoint {checkpoint} does not match this env/policy: {err}") from err
-    return runner.get_inference_policy(device=str(env.device))
+    return policy.eval()

@@ -102,3 +102,11 @@ def foot_contacts(env: TraversalEnv) -> torch.Tensor:
 
 def dr_scales(env: TraversalEnv) -> torch.Tensor:
     return env.dr_scales
+
+
+def scene_group(env: TraversalEnv) -> torch.Tensor:
+    """(N, 1) index of each env's scene group (its scene's kind in ``env.scene_group_names``; 0 on flat ground):
+    routes distillation labels to each group's specialist, never a network input."""
+    if env.scenes is None:
+        return torch.zeros(env.num_envs, 1, device=env.device)
+    return env.scenes.groups_of_envs().to(env.device, torch.float32)[:, None]

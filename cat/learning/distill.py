@@ -1,0 +1,216 @@
+"""Multi-teacher DAgger (paper §III-B) on rsl_rl's ``Distillation``: the student acts, and every env is labelled
+by the specialist of its scene group.
+
+``MultiTeacher`` is the teacher model rsl_rl builds by class name: it loads K PPO specialist checkpoints, checks
+that each one's actor read the same observation layout as the env's teacher groups, freezes them, and routes each
+env to the specialist of its scene group (the ``scene_group`` term in the route group). A teacher's group is the
+scene kind its run trained on (``task.scene_kind``, or its single ``task.scene_groups`` entry; ``flat`` without
+scenes). ``MultiTeacherDistillation`` keeps the teachers out of the student checkpoints: they are reloaded from
+their own files (named in the run's ``config.yaml``), so a student checkpoint stays small.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from dataclasses import dataclass, replace
+
+import torch
+import torch.nn as nn
+from rsl_rl.algorithms import Distillation
+from tensordict import TensorDict
+
+from cat.envs.obs_groups import group_layout
+from cat.learning.config import TrainCfg, policy_model
+
+log = logging.getLogger(__name__)
+
+
+class TeacherError(ValueError):
+    """A teacher checkpoint that cannot label this env (missing, another layout, no or duplicate group)."""
+
+
+def teacher_group(cfg: TrainCfg, checkpoint: str) -> str:
+    """The scene group a specialist run was trained on (one scene kind), or ``TeacherError``."""
+    task = cfg.task
+    if task.scene_groups:
+        if len(task.scene_groups) != 1:
+            raise TeacherError(
+                f"teacher {checkpoint} trained on several scene groups {task.scene_groups}: not a specialist"
+            )
+        return task.scene_groups[0]
+    if task.scene_kind:
+        return task.scene_kind
+    if task.scene_dir:
+        raise TeacherError(f"teacher {checkpoint} trained on all kinds of {task.scene_dir}: set its task.scene_kind")
+    return "flat"
+
+
+def layout_of(cfg: TrainCfg, groups: list[str]) -> tuple:
+    """Concatenated layout of ``groups`` of a run's task (terms, field switch, map sizes per group)."""
+    return tuple(group_layout(cfg.task, g) for g in groups)
+
+
+@dataclass
+class Specialist:
+    checkpoint: str
+    group: str
+    run: TrainCfg
+
+
+def load_specialists(checkpoints: list[str]) -> list[Specialist]:
+    """Each checkpoint with its run config and scene group; ``TeacherError`` names a missing or unusable one."""
+    from cat.learning.runs import CheckpointError, load_run_config, resolve_checkpoint
+
+    if not checkpoints:
+        raise TeacherError("algo=distill needs teachers=[<specialist checkpoint>, ...]")
+    out: list[Specialist] = []
+    for ckpt in checkpoints:
+        try:
+            path = str(resolve_checkpoint(ckpt))
+            run = load_run_config(path)
+        except CheckpointError as err:
+            raise TeacherError(f"teacher {ckpt}: {err}") from None
+        if run.algo.name != "ppo":
+            raise TeacherError(f"teacher {ckpt} is a {run.algo.name} run, not a PPO specialist")
+        group = teacher_group(run, ckpt)
+        if any(s.group == group for s in out):
+            other = next(s.checkpoint for s in out if s.group == group)
+            raise TeacherError(f"teachers {other} and {ckpt} both teach scene group {group!r}")
+        out.append(Specialist(path, group, run))
+    return out
+
+
+def check_teachers(specialists: list[Specialist], cfg: TrainCfg, group_names: list[str]) -> None:
+    """Every scene group of the env has a teacher, and each teacher's actor layout is the env's teacher groups."""
+    own = {s.group for s in specialists}
+    for g in group_names:
+        if g not in own:
+            raise TeacherError(
+                f"scene group {g!r} has no teacher; teachers cover: {', '.join(sorted(own)) or 'nothing'}"
+            )
+    want = layout_of(cfg, list(cfg.algo.distill.teacher_groups))
+    for s in specialists:
+        have = layout_of(s.run, list(s.run.algo.obs_groups["actor"]))
+        if [t for lay in have for t in lay[0]] != [t for lay in want for t in lay[0]] or have != want:
+            raise TeacherError(
+                f"teacher {s.checkpoint} observed {have} but the env's teacher groups "
+                f"{cfg.algo.distill.teacher_groups} give {want}"
+            )
+
+
+class MultiTeacher(nn.Module):
+    """K frozen specialist actors; ``forward`` labels each env with the actor of its scene group."""
+
+    is_recurrent = False
+
+    def __init__(
+        self,
+        obs: TensorDict,
+        obs_groups: dict[str, list[str]],
+        obs_set: str,
+        output_dim: int,
+        checkpoints: list[str] | None = None,
+        group_names: list[str] | None = None,
+        route_group: str = "route",
+    ) -> None:
+        from cat.learning.runs import read_checkpoint
+
+        super().__init__()
+        specialists = load_specialists(list(checkpoints or []))
+        self.group_names = list(group_names or [])
+        self.route_group = route_group
+        if route_group not in obs.keys():
+            raise TeacherError(f"the env builds no observation group {route_group!r} (the scene_group term)")
+        self.teachers = nn.ModuleList()
+        routes = []
+        for s in specialists:
+            model = policy_model(s.run.algo)  # the specialist's actor, reading the env's teacher groups
+            actor = replace(model, obs_set=obs_set, obs_groups=list(obs_groups[obs_set])).build(obs, output_dim)
+            state = read_checkpoint(s.checkpoint)[model.state_key]
+            try:
+                actor.load_state_dict(state, strict=True)
+            except RuntimeError as err:
+                raise TeacherError(f"teacher {s.checkpoint} does not fit the env's teacher groups: {err}") from None
+            actor.eval()
+            for p in actor.parameters():
+                p.requires_grad_(False)
+            self.teachers.append(actor)
+            routes.append(self.group_names.index(s.group) if s.group in self.group_names else -1)
+        self.register_buffer("routes", torch.tensor(routes, dtype=torch.long), persistent=False)
+        self.checkpoints = [s.checkpoint for s in specialists]
+
+    def forward(self, obs: TensorDict, **unused) -> torch.Tensor:
+        group = obs[self.route_group][:, 0].round().long()
+        out = None
+        for k, actor in enumerate(self.teachers):
+            mask = group == self.routes[k]
+            if not mask.any():
+                continue
+            actions = actor(obs[mask])
+            if out is None:
+                out = torch.zeros(group.shape[0], actions.shape[-1], dtype=actions.dtype, device=actions.device)
+            out[mask] = actions
+        if out is None or bool((~torch.isin(group, self.routes)).any()):
+            bad = sorted(set(group.tolist()) - set(self.routes.tolist()))
+            names = [self.group_names[b] if 0 <= b < len(self.group_names) else str(b) for b in bad]
+            raise TeacherError(f"envs of scene group(s) {names} have no teacher")
+        return out
+
+    # rsl_rl's recurrent-model interface (the specialists are MLPs: nothing to carry)
+    def reset(self, dones: torch.Tensor | None = None, hidden_state=None) -> None:
+        pass
+
+    def get_hidden_state(self):
+        return None
+
+    def detach_hidden_state(self, dones: torch.Tensor | None = None) -> None:
+        pass
+
+
+class MultiTeacherDistillation(Distillation):
+    """rsl_rl ``Distillation`` whose checkpoints hold the student (and optimiser) only."""
+
+    def save(self) -> dict:
+        return {
+            "student_state_dict": self._raw_student.state_dict(),
+            "optimizer_state_dict": self.optimizer.state_dict(),
+            "teachers": list(getattr(self._raw_teacher, "checkpoints", [])),
+        }
+
+    def load(self, loaded_dict: dict, load_cfg: dict | None, strict: bool) -> bool:
+        load_cfg = load_cfg or {"student": True, "optimizer": True, "iteration": True}
+        if load_cfg.get("student"):
+            self._raw_student.load_state_dict(loaded_dict["student_state_dict"], strict=strict)
+        if load_cfg.get("optimizer") and "optimizer_state_dict" in loaded_dict:
+            self.optimizer.load_state_dict(loaded_dict["optimizer_state_dict"])
+        return bool(load_cfg.get("iteration", False))
+
+
+def distill_runner_cfg(cfg: TrainCfg, group_names: list[str]) -> dict:
+    """rsl_rl ``DistillationRunner`` config of a distillation run (student, multi-teacher, algorithm)."""
+    from cat.learning.config import student_model_cfg
+
+    algo, d = cfg.algo, cfg.algo.distill
+    return {
+        "num_steps_per_env": algo.num_steps_per_env,
+        "save_interval": algo.save_interval,
+        "check_for_nan": False,
+        "obs_groups": {"student": list(d.student_groups), "teacher": list(d.teacher_groups)},
+        "logger": {"class_name": "cat.learning.rerun_writer:RerunLogWriter"},
+        "algorithm": {
+            "class_name": "cat.learning.distill:MultiTeacherDistillation",
+            "num_learning_epochs": d.num_learning_epochs,
+            "gradient_length": d.gradient_length,
+            "learning_rate": d.learning_rate,
+            "max_grad_norm": d.max_grad_norm,
+            "loss_type": d.loss_type,
+        },
+        "student": student_model_cfg(d, algo.activation, algo.obs_normalization),
+        "teacher": {
+            "class_name": "cat.learning.distill:MultiTeacher",
+            "checkpoints": [os.fspath(c) for c in cfg.teachers],
+            "group_names": list(group_names),
+            "route_group": d.route_group,
+        },
+    }

@@ -1,0 +1,156 @@
+"""Multi-teacher DAgger: routing by scene group, a real small distillation run, observation history, bad input."""
+
+from __future__ import annotations
+
+import csv
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+import torch
+
+from cat.envs.config import ACTOR_TERMS, EnvCfg, ObsGroupCfg
+from cat.learning.config import AlgoCfg, DistillCfg, TrainCfg, policy_model
+from cat.learning.distill import MultiTeacher, TeacherError, check_teachers, load_specialists
+from cat.learning.runs import load_policy, make_env, save_config, train
+
+KINDS = ["hurdle-crouch", "side-pass"]
+
+
+def _obs_groups(history: int = 3) -> dict[str, ObsGroupCfg]:
+    proprio = [t for t in ACTOR_TERMS if t not in ("goal_command", "field_block")]
+    return {
+        "actor": ObsGroupCfg(terms=list(ACTOR_TERMS), noise=True),
+        "critic": ObsGroupCfg(terms=["base_lin_vel"], extends="actor"),
+        "teacher": ObsGroupCfg(terms=list(ACTOR_TERMS)),
+        "student_proprio": ObsGroupCfg(terms=proprio, noise=True, history=history),
+        "student": ObsGroupCfg(terms=["goal_command", "field_block"], noise=True),
+        "route": ObsGroupCfg(terms=["scene_group"]),
+    }
+
+
+def _generalist_cfg(teachers: list[str], student: str = "mlp", num_envs: int = 8) -> TrainCfg:
+    task = EnvCfg(
+        task="generalist",
+        num_envs=num_envs,
+        episode_length_s=2.0,
+        scene_groups=list(KINDS),
+        scene_variants=1,
+        observations=_obs_groups(),
+    )
+    task.curriculum.enabled = False
+    distill = DistillCfg(
+        student=student,
+        hidden_dims=[32, 32],
+        rnn_hidden_dim=16,
+        gradient_length=8,
+        learning_rate=5e-3,
+        num_learning_epochs=4,
+        student_groups=["student_proprio", "student"],
+    )
+    algo = AlgoCfg(name="distill", distill=distill, num_steps_per_env=8, save_interval=100)
+    return TrainCfg(task=task, algo=algo, teachers=teachers, max_iterations=6, seed=0)
+
+
+@pytest.fixture(scope="module")
+def env():
+    return make_env(_generalist_cfg([]))
+
+
+def _teacher(folder: Path, kind: str, value: float, env, terms: list[str] | None = None) -> str:
+    """A specialist checkpoint whose actor outputs ``value`` on every action, whatever it observes."""
+    task = EnvCfg(task=kind.replace("-", "_"), scene_kind=kind, num_envs=4, scene_variants=1)
+    if terms is not None:
+        task.observations = {"actor": ObsGroupCfg(terms=terms, noise=True), "critic": ObsGroupCfg(extends="actor")}
+    run = TrainCfg(task=task)
+    folder.mkdir(parents=True)
+    save_config(run, folder)
+    model = replace(policy_model(run.algo), obs_groups=["teacher"])
+    obs = env.get_observations()
+    if terms is not None:  # another layout: an input width the env's teacher group does not have
+        obs = obs.clone()
+        obs["teacher"] = obs["teacher"][:, : -7 * 13]
+    actor = model.build(obs, env.num_actions)
+    last = actor.mlp[-1]
+    torch.nn.init.zeros_(last.weight)
+    torch.nn.init.constant_(last.bias, value)
+    path = folder / "model_0.pt"
+    torch.save({"actor_state_dict": actor.state_dict(), "iter": 0, "infos": None}, path)
+    return str(path)
+
+
+@pytest.fixture(scope="module")
+def teachers(env, tmp_path_factory):
+    root = tmp_path_factory.mktemp("teachers")
+    return [_teacher(root / "hc", KINDS[0], 0.5, env), _teacher(root / "sp", KINDS[1], -0.5, env)]
+
+
+def test_scene_groups_and_route_term(env):
+    assert env.scene_group_names == KINDS
+    group = env.get_observations()["route"][:, 0]
+    scene_kind = [env.scenes.scenes[int(s)].kind for s in env.scenes.scene_of_env]
+    assert [KINDS[int(g)] for g in group] == scene_kind
+    assert set(group.tolist()) == {0.0, 1.0}
+
+
+def test_routing_labels_each_env_by_its_groups_teacher(env, teachers):
+    obs = env.get_observations()
+    teacher = MultiTeacher(obs, {"teacher": ["teacher"]}, "teacher", env.num_actions, teachers, KINDS, "route")
+    labels = teacher(obs)
+    group = obs["route"][:, 0].long()
+    expected = torch.where(group == 0, 0.5, -0.5)[:, None].expand_as(labels)
+    assert torch.allclose(labels, expected)
+    # teachers given in the other order route the same way (routing follows each teacher's own scene kind)
+    swapped = MultiTeacher(obs, {"teacher": ["teacher"]}, "teacher", env.num_actions, teachers[::-1], KINDS, "route")
+    assert torch.allclose(swapped(obs), expected)
+    assert not any(p.requires_grad for p in teacher.parameters())
+
+
+def test_history_group_stacks_oldest_first_and_restarts_at_reset(env):
+    obs0 = env.get_observations()
+    width = obs0["student_proprio"].shape[1] // 3
+    first = obs0["student_proprio"].view(env.num_envs, 3, width)
+    assert torch.equal(first[:, 0], first[:, 2])  # filled with the current value after reset
+    obs1, *_ = env.step(torch.zeros(env.num_envs, env.num_actions))
+    hist = obs1["student_proprio"].view(env.num_envs, 3, width)
+    assert torch.equal(hist[:, 1], first[:, 2])  # shifted by one step
+    assert not torch.equal(hist[:, 2], hist[:, 1])
+    env.reset_idx(torch.tensor([0]))
+    env._compute_obs()
+    again = env.get_observations()["student_proprio"].view(env.num_envs, 3, width)
+    assert torch.equal(again[0, 0], again[0, 2])  # env 0 restarted
+    assert torch.equal(again[1, 1], hist[1, 2])  # env 1 carried on
+
+
+def test_bad_teachers_give_one_clear_error(env, teachers, tmp_path):
+    cfg = _generalist_cfg(teachers)
+    with pytest.raises(TeacherError, match="not found"):
+        load_specialists([str(tmp_path / "missing" / "model_9.pt")])
+    with pytest.raises(TeacherError, match="scene group 'side-pass' has no teacher"):
+        check_teachers(load_specialists(teachers[:1]), cfg, env.scene_group_names)
+    other = _teacher(tmp_path / "other", KINDS[1], 0.0, env, terms=[t for t in ACTOR_TERMS if t != "field_block"])
+    with pytest.raises(TeacherError, match=f"teacher {other} observed"):
+        check_teachers(load_specialists([teachers[0], other]), cfg, env.scene_group_names)
+    with pytest.raises(TeacherError, match="both teach scene group 'hurdle-crouch'"):
+        load_specialists([teachers[0], teachers[0]])
+
+
+@pytest.mark.parametrize("student", ["mlp", "lstm"])
+def test_small_dagger_run_lowers_the_loss_and_the_student_plays(teachers, tmp_path, student):
+    cfg = _generalist_cfg(teachers, student=student)
+    cfg.run_dir = str(tmp_path / "run")
+    run = train(cfg)
+    rows = list(csv.DictReader(open(run / "metrics.csv")))
+    loss = [float(r["value"]) for r in rows if r["tag"] == "Loss/behavior"]
+    assert len(loss) == cfg.max_iterations
+    assert loss[-1] < 0.5 * loss[0], loss
+    ckpt = torch.load(run / "model_5.pt", weights_only=False)
+    assert "student_state_dict" in ckpt and "teacher_state_dict" not in ckpt  # teachers stay in their own files
+    play_env = make_env(cfg, num_envs=2)
+    policy = load_policy(run / "model_5.pt", play_env, cfg)
+    policy.reset()
+    obs = play_env.get_observations()
+    for _ in range(3):
+        actions = policy(obs)
+        assert actions.shape == (2, play_env.num_actions) and torch.isfinite(actions).all()
+        obs, *_ = play_env.step(actions)

@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 import pytest
+import yaml
 
 REPO = Path(__file__).resolve().parents[1]
 SMALL = ["task=flat", "num_envs=4", "max_iterations=1", "algo.num_steps_per_env=4"]
@@ -49,11 +50,16 @@ def test_help_and_cfg_job_build_nothing(tmp_path):
 
 
 def test_multirun_and_hydra_dirs(tmp_path):
-    res = _run("train.py", "-m", *SMALL, "seed=0,1", f"hydra.sweep.dir={tmp_path / 'sweep'}")
+    small = [a for a in SMALL if not a.startswith("task=")]
+    sweep = ["task=flat,side_pass", "seed=0,1", "task.scene_variants=1"]  # two tasks x two seeds
+    res = _run("train.py", "-m", *small, *sweep, f"hydra.sweep.dir={tmp_path / 'sweep'}")
     assert res.returncode == 0, res.stderr
-    assert sorted(p.name for p in (tmp_path / "sweep").iterdir()) == ["0", "1"]
-    for k in ("0", "1"):
+    assert sorted(p.name for p in (tmp_path / "sweep").iterdir()) == ["0", "1", "2", "3"]
+    tasks = []
+    for k in ("0", "1", "2", "3"):
         assert list((tmp_path / "sweep" / k).glob("model_*.pt"))
+        tasks.append(yaml.safe_load((tmp_path / "sweep" / k / "config.yaml").read_text())["task"]["task"])
+    assert tasks == ["flat", "flat", "side_pass", "side_pass"]
     res = _run("train.py", *SMALL, f"hydra.run.dir={tmp_path / 'exact'}")
     assert res.returncode == 0 and (tmp_path / "exact" / "config.yaml").is_file()
 

@@ -216,6 +216,10 @@ class EnvCfg:
     # with no scene_dir: typical kinds mixed in one scene set (scene_variants of each); each kind is a scene group,
     # taught by its own specialist in distillation (algo=distill). Overrides scene_kind.
     scene_groups: list[str] = field(default_factory=list)
+    # training aid: robot-obstacle contacts are detected (collision sensor, penalty, success rule) but exert no
+    # force, as in the authors' release (no physical obstacles). A trip no longer ends in a fall, so the policy
+    # learns to avoid contact before it must survive it. Evaluation is always physical (cat.eval.runner).
+    ghost_obstacles: bool = False
     scene_variants: int = 10  # typical variants built when scene_dir is None (difficulty spread over [0, 1])
     scene_seed: int = 0  # seed of the typical variants (seeds scene_seed..+variants-1); not the RL seed
     action_clip: float = 1.0

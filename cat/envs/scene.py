@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import mujoco
+import numpy as np
 
 from cat.envs.robot import OBSTACLE_BODY, RobotCfg, compile_model, robot_spec
 
@@ -21,6 +22,21 @@ def query_vel_sensor(name: str) -> str:
 
 def foot_contact_sensor(foot_body: str) -> str:
     return f"floor_contact_{foot_body}"
+
+
+GHOST_GAP = 100.0
+"""Contact gap [m] of ghost obstacles: a contact is active only below -gap penetration, i.e. never."""
+
+
+def make_obstacles_ghost(model: mujoco.MjModel) -> int:
+    """Obstacle contacts stay in ``mjData.contact`` (the collision sensor counts them) but leave the solver:
+    MuJoCo's inactive contacts (``geom_gap`` > penetration). Returns the number of obstacle geoms changed."""
+    body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, OBSTACLE_BODY)
+    if body < 0:
+        return 0
+    geoms = np.flatnonzero(model.geom_bodyid == body)
+    model.geom_gap[geoms] = GHOST_GAP + model.geom_margin[geoms]
+    return len(geoms)
 
 
 def build_env_model(

@@ -33,6 +33,7 @@ from cat.envs.scene import (
     COLLISION_SENSOR,
     build_env_model,
     foot_contact_sensor,
+    make_obstacles_ghost,
     query_pos_sensor,
     query_vel_sensor,
 )
@@ -88,6 +89,8 @@ class TraversalEnv(VecEnv):
         rew_terms.heading_gate(cfg.rewards.params.heading_gate)
 
         model = build_env_model(self.robot, scenes.add_to_spec if scenes is not None else None)
+        if cfg.ghost_obstacles:
+            make_obstacles_ghost(model)
         self.sim = make_backend(sim, model, self.num_envs, self.robot.decimation, device=device)
         self.device = self.sim.device
         self.field = None

@@ -1,7 +1,8 @@
 """ONNX export (scripts/export.py) and the deploy policy loader: onnxruntime = torch within 1e-5 on 1,000
 observations of a real rollout (the shipped MLP actor; an LSTM student with its state carried over all 1,000
-steps), the metadata round trip, the shipped checkpoint's ONNX driving the click demo's runtime, and bad input
-as one clear error. (The runtime's actor observation = the env's for the same MuJoCo state is
+steps; an MLP student reading a 5-step history group), the metadata round trip, the shipped checkpoint's ONNX
+driving the click demo's runtime, history stacked by the runtime as by the env, and bad input as one clear
+error. (The runtime's actor observation = the env's for the same MuJoCo state is
 tests/test_deploy.py::test_observation_matches_env_actor_group.)"""
 
 from __future__ import annotations
@@ -31,9 +32,38 @@ STEPS = 1000
 TOL = 1e-5
 
 
+PROPRIO = ["gyro", "projected_gravity", "joint_pos", "joint_vel", "last_action", "leg_targets", "gait_phase"]
+HISTORY = 5
+
+
 def _task() -> EnvCfg:
-    """The default task plus a ``student`` group (the actor's terms, noise-free), as a distillation run has."""
-    return EnvCfg(num_envs=1, observations={**default_obs_groups(), "student": ObsGroupCfg(terms=list(ACTOR_TERMS))})
+    """The default task plus distillation-style student groups: ``student`` (the actor's terms, noise-free) and,
+    as task=generalist has them, ``student_proprio`` (proprioception, 5-step history) + ``student_field``."""
+    groups = {
+        **default_obs_groups(),
+        "student": ObsGroupCfg(terms=list(ACTOR_TERMS)),
+        "student_proprio": ObsGroupCfg(terms=PROPRIO, noise=True, history=HISTORY),
+        "student_field": ObsGroupCfg(terms=["goal_command", "field_block"], noise=True),
+    }
+    return EnvCfg(num_envs=1, observations=groups)
+
+
+def _student_run(folder: Path, rollout_obs: TensorDict, distill: DistillCfg) -> tuple[Path, Path]:
+    """A distillation-style run folder: config.yaml (algo.name=distill) and model_0.pt holding an untrained student
+    whose normaliser has the rollout's statistics (so the baked normaliser matters) and whose actions reach ~1
+    (a trained policy's range; untrained: ~0.1). Returns (folder, its exported ONNX file)."""
+    cfg = TrainCfg(task=_task(), algo=AlgoCfg(name="distill", distill=distill))
+    save_config(cfg, folder)
+    torch.manual_seed(0)
+    pm = policy_model(cfg.algo)
+    model = pm.build(rollout_obs[:1], 12)
+    x = torch.cat([rollout_obs[g] for g in pm.obs_groups], dim=-1)
+    with torch.no_grad():
+        model.obs_normalizer._mean.copy_(x.mean(0, keepdim=True))
+        model.obs_normalizer._std.copy_(x.std(0, keepdim=True))
+        model.mlp[-1].weight.mul_(10.0)
+    torch.save({"student_state_dict": model.state_dict(), "iter": 0}, folder / "model_0.pt")
+    return folder, export(ExportCfg(checkpoint=str(folder), out=str(folder / "student.onnx"))).path
 
 
 @pytest.fixture(scope="module")
@@ -58,22 +88,15 @@ def shipped_onnx(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def lstm_run(tmp_path_factory, rollout):
-    """A distillation-style run folder: config.yaml (algo.name=distill, LSTM student) and model_0.pt holding an
-    untrained student whose normaliser has the rollout's statistics (so the baked normaliser matters)."""
-    folder = tmp_path_factory.mktemp("lstm_run")
-    cfg = TrainCfg(task=_task(), algo=AlgoCfg(name="distill", distill=DistillCfg(student="lstm")))
-    save_config(cfg, folder)
-    _, obs = rollout
-    torch.manual_seed(0)
-    model = policy_model(cfg.algo).build(obs[:1], 12)
-    student = obs["student"]
-    model.obs_normalizer._mean.copy_(student.mean(0, keepdim=True))
-    model.obs_normalizer._std.copy_(student.std(0, keepdim=True))
-    with torch.no_grad():
-        model.mlp[-1].weight.mul_(10.0)  # actions of order one, like a trained policy's (untrained: ~0.1)
-    torch.save({"student_state_dict": model.state_dict(), "iter": 0}, folder / "model_0.pt")
-    onnx = export(ExportCfg(checkpoint=str(folder), out=str(folder / "student.onnx"))).path
-    return folder, onnx
+    """An LSTM student reading the ``student`` group."""
+    return _student_run(tmp_path_factory.mktemp("lstm_run"), rollout[1], DistillCfg(student="lstm"))
+
+
+@pytest.fixture(scope="module")
+def history_run(tmp_path_factory, rollout):
+    """An MLP student reading ``student_proprio`` (5-step history) + ``student_field``, as task=generalist's."""
+    groups = ["student_proprio", "student_field"]
+    return _student_run(tmp_path_factory.mktemp("history_run"), rollout[1], DistillCfg(student_groups=groups))
 
 
 def test_mlp_parity_on_rollout(rollout, shipped_onnx):
@@ -289,11 +312,58 @@ def test_bad_policy_files_are_one_clear_line(tmp_path, caplog, shipped_onnx):
         _one_error(caplog, code, needle)
 
 
-def test_history_is_refused_until_supported(shipped_onnx, tmp_path):
-    meta = read_metadata(shipped_onnx)
-    stacked = {"actor": {**meta.observation["actor"], "history": 3}}
-    with pytest.raises(NotImplementedError, match="history"):
-        policy_spec(str(_edited(shipped_onnx, tmp_path / "h.onnx", observation=stacked)))
+def _assert_stacked(seq: list[torch.Tensor], h: int) -> None:
+    """``seq[t]`` (H * D,) is the last H vectors at step t, oldest first, the first step's repeated before it."""
+    blocks = [s.view(h, -1) for s in seq]
+    for t, b in enumerate(blocks):
+        for k in range(h):
+            assert torch.equal(b[k], blocks[max(t - (h - 1 - k), 0)][-1]), (t, k)
+    assert not torch.equal(blocks[-1][0], blocks[-1][-1])  # the history really moves
+
+
+def test_history_student_in_env_export_and_runtime(rollout, history_run):
+    """A 5-step history group: the env stacks it (oldest first, filled at reset); the export sizes it 5x; ONNX =
+    torch on the 1,000 observations; the click demo's runtime stacks the same way and its ONNX = torch."""
+    import threading
+
+    from cat.deploy.runtime import DeployCfg, Runtime
+    from cat.deploy.scenes import load_scene
+
+    folder, onnx = history_run
+    _, obs = rollout
+    _assert_stacked(list(obs["student_proprio"][:40]), HISTORY)  # the env (no reset in the first 40 steps)
+    meta = read_metadata(onnx)
+    assert meta.obs_groups == ["student_proprio", "student_field"]
+    assert meta.observation["student_proprio"]["history"] == HISTORY
+    assert meta.obs_dim == HISTORY * (3 + 3 + 29 + 29 + 12 + 12 + 2) + 3 + 91 == obs["student_proprio"].shape[1] + 94
+    ort = load_policy(policy_spec(str(onnx)), obs[:1], 12)
+    ref = load_policy(policy_spec(str(folder)), obs[:1], 12)
+    diff = float((ort(obs) - ref(obs)).abs().max())
+    print(f"history student parity: max|d action|={diff:.2e} over {len(obs)} observations")
+    assert diff <= TOL
+
+    rt = Runtime(load_scene("flat"), policy_spec(str(onnx)), DeployCfg(realtime=False))
+    assert rt.observation()["student_proprio"].shape == (1, HISTORY * 90)
+    seen, diffs = [], []
+    inner = rt.policy
+
+    class Both:
+        def __call__(self, o):
+            seen.append(o["student_proprio"][0].clone())
+            a = inner(o)
+            b = ref(o)  # the untrained student falls and its raw actions grow to ~15: float32 spacing ~1e-6 there
+            diffs.append(float(((a - b).abs() / b.abs().clamp_min(1.0)).max()))
+            return a
+
+        def reset(self):
+            inner.reset()
+
+    rt.policy = Both()
+    rt.set_goal((2.0, 0.0))
+    rt.run(threading.Event(), lambda r: r.step_count >= 30)
+    print(f"history runtime parity: max|d action|/max(1,|a|)={max(diffs):.2e} over {len(diffs)} control steps")
+    assert len(seen) >= 2 * HISTORY and max(diffs) <= TOL  # an untrained student: it falls after ~13 steps
+    _assert_stacked(seen, HISTORY)  # the runtime
 
 
 def test_batch_of_observations_through_onnx(shipped_onnx):

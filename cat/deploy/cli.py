@@ -104,7 +104,7 @@ SCRIPT = Script(
     load=dataclass_loader(ClickCfg, required=("scene", "checkpoint")),
     job=job,
     keys=list(ClickCfg.__dataclass_fields__),
-    errors=(SceneError, CheckpointError, GoalError, MenagerieModelError, OSError, ValueError, NotImplementedError),
+    errors=(SceneError, CheckpointError, GoalError, MenagerieModelError, OSError, ValueError),
 )
 
 

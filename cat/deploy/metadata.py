@@ -67,6 +67,7 @@ _TERMS = {
     "link_positions": (lambda t, r: 3 * len(r.query_links), None, "query links minus root, yaw frame (privileged)"),
     "foot_contacts": (lambda t, r: 2, None, "left, right foot contact in {0, 1} (privileged)"),
     "dr_scales": (lambda t, r: 3, None, "domain-randomisation scales kp, kd, mass (privileged)"),
+    "scene_group": (lambda t, r: 1, None, "index of the env's scene group (distillation routing, not a network input)"),
     "elevation_map": (
         lambda t, r: 2 * int(np.prod(map_shape(t.perception.height_map))),
         lambda t: t.perception.height_map.overhead_cap,
@@ -118,7 +119,7 @@ class PolicyMetadata:
     field_constants: dict = field(default_factory=dict)  # cat.fields.FieldCfg
     field_obs: dict = field(default_factory=dict)  # task.field_obs + the free-space convention
     query_links: list[str] = field(default_factory=list)  # field_block link order
-    task: dict = field(default_factory=dict)  # the training task (name, scene_kind, scene_dir, method, algo)
+    task: dict = field(default_factory=dict)  # training task: name, scene_kind / scene_groups / scene_dir, method, algo
     robot_model: dict = field(default_factory=dict)  # menagerie source and version
     producer: dict = field(default_factory=dict)  # git commit, checkpoint, iteration, library versions
 
@@ -147,7 +148,7 @@ class PolicyMetadata:
 
 def free_space_sdf(task: EnvCfg) -> float | None:
     """The flat task's field convention: free space reads d = sdf_clip and grad d = 0 (None: field as built)."""
-    flat = not (task.scene_dir or task.scene_kind)
+    flat = not (task.scene_dir or task.scene_kind or task.scene_groups)
     return task.field_obs.sdf_clip if flat else None
 
 
@@ -168,7 +169,7 @@ def layout_metadata(
         raise ValueError(f"the policy reads observation group {missing[0]!r}, the task builds {', '.join(groups)}")
     observation, dim = {}, 0
     for g in obs_groups:
-        history = int(getattr(task.observations[g], "history", 1))
+        history = int(task.observations[g].history)
         terms = [term_info(t, task, robot, (sizes or {}).get(t)) for t in groups[g]]
         observation[g] = {"history": history, "terms": [asdict(t) for t in terms]}
         if all(t.size is not None for t in terms):
@@ -203,7 +204,12 @@ def layout_metadata(
             "free_space_sdf": free,  # not None: free space reads d = this and grad d = 0 (the flat task's field)
         },
         query_links=[q.name for q in robot.query_links],
-        task={"name": task.task, "scene_kind": task.scene_kind, "scene_dir": task.scene_dir},
+        task={
+            "name": task.task,
+            "scene_kind": task.scene_kind,
+            "scene_groups": list(task.scene_groups),
+            "scene_dir": task.scene_dir,
+        },
     )
 
 

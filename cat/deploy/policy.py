@@ -60,19 +60,18 @@ def policy_spec(checkpoint: str) -> PolicySpec:
 
 def task_from_metadata(meta: PolicyMetadata) -> EnvCfg:
     """The task settings the runtime reads, from an exported policy's metadata (the rest keep their defaults)."""
-    history = {g: o["history"] for g, o in meta.observation.items() if o["history"] != 1}
-    if history:
-        raise NotImplementedError(
-            f"observation history {history} (ObsGroupCfg.history) is not supported by the deploy runtime yet"
-        )
     fo = meta.field_obs
     return EnvCfg(
         task=meta.task.get("name", "flat"),
         scene_kind=meta.task.get("scene_kind"),
+        scene_groups=list(meta.task.get("scene_groups") or []),
         scene_dir=meta.task.get("scene_dir"),
         action_clip=float(meta.action["clip"]),
         gait_freq=tuple(meta.gait["freq_range_hz"]),
-        observations={g: ObsGroupCfg(terms=[t["name"] for t in o["terms"]]) for g, o in meta.observation.items()},
+        observations={
+            g: ObsGroupCfg(terms=[t["name"] for t in o["terms"]], history=int(o["history"]))
+            for g, o in meta.observation.items()
+        },
         field_obs=FieldObsCfg(enabled=fo["enabled"], refresh_hz=fo["refresh_hz"], sdf_clip=fo["sdf_clip"]),
     )
 

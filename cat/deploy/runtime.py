@@ -118,6 +118,8 @@ class Runtime:
         self.cfg: EnvCfg = spec.task  # named as in the env: the shared term functions read ``env.cfg``
         self.task = self.cfg
         self.group_terms = _deployable_groups(self.task, spec.obs_groups)
+        self.history = {g: int(self.task.observations[g].history) for g in self.group_terms}
+        self._history: dict[str, torch.Tensor] = {}  # group -> (1, H, D) last H vectors the policy read
         names = dict.fromkeys(t for terms in self.group_terms.values() for t in terms)
         self._term_fns = {t: lookup_term(obs_terms, t, "observation") for t in names}
         self.robot = robot or load_robot_cfg()
@@ -190,6 +192,7 @@ class Runtime:
             self._prev_link_pos: torch.Tensor | None = None
             self._links_step = -1
             self._released = False
+            self._history = {}  # stacked groups restart, filled with their next value (as at an env reset)
             self._in_contact = False
             self._update_state(self.estimate())
             if hasattr(self, "policy"):
@@ -276,11 +279,25 @@ class Runtime:
         if self.task.field_obs.enabled:
             self.field_obs_buf = field_obs(st.yaw, f_h, grad, sdf, self.task.field_obs)
 
-    def observation(self) -> TensorDict:
-        """The groups the policy reads exactly as the env concatenates them (without training noise)."""
+    def observation(self, commit: bool = False) -> TensorDict:
+        """The groups the policy reads exactly as the env builds them (without training noise).
+
+        A group with ``history`` H > 1 is its last H vectors, oldest first, the older ones those the policy read
+        at its previous steps (all the current one after a reset or at release). ``commit``: this observation is
+        the one the policy reads at this control step (the history moves on); otherwise nothing changes."""
         values = {t: fn(self) for t, fn in self._term_fns.items()}
-        groups = {g: torch.cat([values[t] for t in terms], dim=-1) for g, terms in self.group_terms.items()}
-        return TensorDict(groups, batch_size=[1])
+        out = {}
+        for g, terms in self.group_terms.items():
+            value = torch.cat([values[t] for t in terms], dim=-1)
+            h = self.history[g]
+            if h > 1:
+                past = self._history.get(g)
+                stack = value[:, None].repeat(1, h, 1) if past is None else torch.cat((past[:, 1:], value[:, None]), 1)
+                if commit:
+                    self._history[g] = stack
+                value = stack.flatten(1)
+            out[g] = value
+        return TensorDict(out, batch_size=[1])
 
     # --- goals ----------------------------------------------------------------------------------------------
     def set_goal(self, xy) -> np.ndarray:
@@ -316,11 +333,12 @@ class Runtime:
             if self.step_count % self.field_refresh == 0:
                 self._refresh_field_obs()
             if self.walking:
-                if not self._released:  # the policy's first step: a fresh recurrent state, as at an episode start
+                if not self._released:  # the policy's first step: fresh recurrent state and history, as at a reset
                     self.policy.reset()
+                    self._history = {}
                     self._released = True
                 with torch.inference_mode():
-                    act = self.policy(self.observation())
+                    act = self.policy(self.observation(commit=True))
                 self.actions = act.to(torch.float32).clamp(-self.task.action_clip, self.task.action_clip)
             else:
                 self.actions = torch.zeros_like(self.actions)
@@ -426,18 +444,15 @@ class Runtime:
 
 
 def _deployable_groups(task: EnvCfg, obs_groups: list[str]) -> dict[str, list[str]]:
-    """Group -> terms for the groups a policy reads; ``ValueError`` for a group the task lacks or a term a robot
-    cannot compute, ``NotImplementedError`` for stacked history (``ObsGroupCfg.history`` > 1)."""
+    """Group -> terms for the groups a policy reads; ``ValueError`` for a group the task lacks, a term a robot
+    cannot compute or a history below 1."""
     groups = resolve_groups(task.observations)
     out = {}
     for g in obs_groups:
         if g not in groups:
             raise ValueError(f"the policy reads observation group {g!r}, its task has {', '.join(groups)}")
-        if int(getattr(task.observations[g], "history", 1)) > 1:
-            raise NotImplementedError(
-                f"observation group {g!r} stacks history (ObsGroupCfg.history > 1): not supported by the deploy "
-                "runtime yet"
-            )
+        if int(task.observations[g].history) < 1:
+            raise ValueError(f"observation group {g!r} has history={task.observations[g].history}; must be >= 1")
         bad = [t for t in groups[g] if t not in DEPLOYABLE_TERMS]
         if bad:
             raise ValueError(f"the policy observes {bad}, which this deployed robot does not compute")

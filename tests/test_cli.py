@@ -106,6 +106,7 @@ def test_corrupt_checkpoint_is_one_line_from_the_real_script(tmp_path):
         ("plot_training", "run"),
         ("mesh_to_scene", "mesh"),
         ("click_and_traverse", "scene"),
+        ("export", "checkpoint"),
     ],
 )
 def test_every_script_helps_and_suggests(tmp_path, caplog, capsys, name, key):

@@ -25,7 +25,7 @@ log = logging.getLogger("click_and_traverse")
 
 DOC = """Click-and-Traverse (paper §III-C) in simulation with live perception (docs/demo.md).
 
-  python scripts/click_and_traverse.py scene=<flat|typical type|scene folder|mesh file> checkpoint=<model.pt|hold>
+  python scripts/click_and_traverse.py scene=<flat|typical type|scene folder|mesh> checkpoint=<model.pt|x.onnx|hold>
       starts the browser view on http://host:port (printed); click the floor to send the G1 there.
   ... goal=x,y [time_limit=20] [record=run.rrd]
       headless: prints success=<0|1> time_s=<t> distance_error=<m> collisions=<n> field_updates_hz=<f>
@@ -35,7 +35,7 @@ DOC = """Click-and-Traverse (paper §III-C) in simulation with live perception (
 @dataclass
 class ClickCfg:
     scene: str = "???"  # flat | typical type (hurdle-crouch, ...) | scene folder | mesh file (OBJ/PLY/STL)
-    checkpoint: str = "???"  # rsl_rl model_*.pt (config.yaml beside it) | hold (zero actions)
+    checkpoint: str = "???"  # rsl_rl model_*.pt (config.yaml beside it) | run folder | exported .onnx | hold
     goal: str = ""  # "x,y": headless, no browser
     time_limit: float = 20.0  # headless: seconds of robot time after the goal is set (the trial window)
     record: str = ""  # headless: .rrd path for rerun

@@ -3,9 +3,11 @@
 The simulator (MuJoCo C, one ``MjData``) plays the world and the sensors. The controller sees only what a G1
 has: IMU (gyro, orientation), joint encoders, an odometry pose (here the simulator's pelvis pose plus optional
 noise: the stand-in for the paper's LiDAR-inertial odometry) and the live HumanoidPF from its own LiDAR map
-(``cat.deploy.perception``). The actor observation is built by the env's own term functions
-(``cat.envs.mdp.observations``) on a one-robot context, the field block by the same ``field_obs``, and actions
-go through the same ``apply_actions``.
+(``cat.deploy.perception``). The observation groups the policy reads (``PolicySpec.obs_groups``: the actor, or
+a distilled student) are built by the env's own term functions (``cat.envs.mdp.observations``) on a one-robot
+context, the field block by the same ``field_obs``, and actions go through the same ``apply_actions``. The
+policy is a checkpoint or an exported ONNX file (``cat.deploy.policy``); an ONNX file whose metadata differs
+from this runtime's layout is refused.
 """
 
 from __future__ import annotations
@@ -21,8 +23,9 @@ import torch
 from tensordict import TensorDict
 
 from cat.deploy.kinematics import RobotFK, gravity_in_body
+from cat.deploy.metadata import PolicyMetadata, free_space_sdf, layout_metadata
 from cat.deploy.perception import LiveField, Perception, PerceptionCfg, RobotEstimate, Snapshot
-from cat.deploy.policy import PolicySpec, load_actor
+from cat.deploy.policy import PolicySpec, load_policy
 from cat.deploy.scenes import GoalChecker
 from cat.deploy.voxel_map import map_grid
 from cat.envs.config import ACTOR_TERMS, EnvCfg
@@ -43,7 +46,7 @@ from cat.terrain.mujoco_export import add_obstacles_to_spec
 log = logging.getLogger(__name__)
 
 DEPLOYABLE_TERMS = ACTOR_TERMS
-"""Actor terms a robot can compute (the default actor group is exactly that); others are refused."""
+"""Observation terms a robot can compute (the default actor group is exactly that); others are refused."""
 
 
 @dataclass
@@ -114,14 +117,11 @@ class Runtime:
         self.scene, self.spec = scene, spec
         self.cfg: EnvCfg = spec.task  # named as in the env: the shared term functions read ``env.cfg``
         self.task = self.cfg
-        groups = resolve_groups(self.task.observations)
-        if "actor" not in groups:
-            raise ValueError(f"the policy's task has no 'actor' observation group (groups: {', '.join(groups)})")
-        self.actor_terms = groups["actor"]
-        bad = [t for t in self.actor_terms if t not in DEPLOYABLE_TERMS]
-        if bad:
-            raise ValueError(f"the policy observes {bad}, which this deployed robot does not compute")
-        self._actor_fns = [lookup_term(obs_terms, t, "observation") for t in self.actor_terms]
+        self.group_terms = _deployable_groups(self.task, spec.obs_groups)
+        self.history = {g: int(self.task.observations[g].history) for g in self.group_terms}
+        self._history: dict[str, torch.Tensor] = {}  # group -> (1, H, D) last H vectors the policy read
+        names = dict.fromkeys(t for terms in self.group_terms.values() for t in terms)
+        self._term_fns = {t: lookup_term(obs_terms, t, "observation") for t in names}
         self.robot = robot or load_robot_cfg()
         self.field_cfg = field_cfg or FieldCfg()
         has_obstacles = len(scene.mesh.faces) > 0
@@ -142,7 +142,9 @@ class Runtime:
         self._init_controller()
         self.goal_version = 0
         self.reset()
-        self.policy = load_actor(spec, self.observation(), len(self.robot.policy_joints))
+        obs = self.observation()
+        self.layout = self._layout()
+        self.policy = load_policy(spec, obs, len(self.robot.policy_joints), self.layout)
 
     # --- controller state (one robot, shaped like the env's batch of one) ----------------------------------
     def _init_controller(self) -> None:
@@ -158,8 +160,7 @@ class Runtime:
         self.w0[0] = self.field_cfg.w_root  # the root (pelvis) has priority, as in the env
         # A policy trained on flat ground saw the analytic empty-space field: d = sdf_clip, grad d = 0 wherever
         # nothing is near. Report free space that way to it; scene-trained policies get the field as built.
-        flat = not (self.task.scene_dir or self.task.scene_kind)
-        self._free_space_sdf = self.task.field_obs.sdf_clip if flat else None
+        self._free_space_sdf = free_space_sdf(self.task)
         self.field_refresh = max(1, round(1.0 / (self.task.field_obs.refresh_hz * self.dt)))
         self.perception_every = max(1, round(1.0 / (self.deploy.perception.rate_hz * self.dt)))
 
@@ -191,8 +192,17 @@ class Runtime:
             self._prev_link_pos: torch.Tensor | None = None
             self._links_step = -1
             self._released = False
+            self._history = {}  # stacked groups restart, filled with their next value (as at an env reset)
             self._in_contact = False
             self._update_state(self.estimate())
+            if hasattr(self, "policy"):
+                self.policy.reset()
+
+    def _layout(self) -> PolicyMetadata:
+        """This runtime's observation / action / field layout, with term sizes as it computes them."""
+        sizes = {t: int(fn(self).shape[-1]) for t, fn in self._term_fns.items()}
+        limits = torch.stack((self.soft_lower, self.soft_upper), dim=-1).numpy()
+        return layout_metadata(self.robot, self.field_cfg, self.task, list(self.group_terms), limits, sizes)
 
     # --- what the robot knows -------------------------------------------------------------------------------
     def estimate(self) -> RobotEstimate:
@@ -269,10 +279,25 @@ class Runtime:
         if self.task.field_obs.enabled:
             self.field_obs_buf = field_obs(st.yaw, f_h, grad, sdf, self.task.field_obs)
 
-    def observation(self) -> TensorDict:
-        """The ``actor`` group exactly as the env concatenates it (without training noise)."""
-        terms = [fn(self) for fn in self._actor_fns]
-        return TensorDict({"actor": torch.cat(terms, dim=-1)}, batch_size=[1])
+    def observation(self, commit: bool = False) -> TensorDict:
+        """The groups the policy reads exactly as the env builds them (without training noise).
+
+        A group with ``history`` H > 1 is its last H vectors, oldest first, the older ones those the policy read
+        at its previous steps (all the current one after a reset or at release). ``commit``: this observation is
+        the one the policy reads at this control step (the history moves on); otherwise nothing changes."""
+        values = {t: fn(self) for t, fn in self._term_fns.items()}
+        out = {}
+        for g, terms in self.group_terms.items():
+            value = torch.cat([values[t] for t in terms], dim=-1)
+            h = self.history[g]
+            if h > 1:
+                past = self._history.get(g)
+                stack = value[:, None].repeat(1, h, 1) if past is None else torch.cat((past[:, 1:], value[:, None]), 1)
+                if commit:
+                    self._history[g] = stack
+                value = stack.flatten(1)
+            out[g] = value
+        return TensorDict(out, batch_size=[1])
 
     # --- goals ----------------------------------------------------------------------------------------------
     def set_goal(self, xy) -> np.ndarray:
@@ -308,9 +333,12 @@ class Runtime:
             if self.step_count % self.field_refresh == 0:
                 self._refresh_field_obs()
             if self.walking:
-                self._released = True
+                if not self._released:  # the policy's first step: fresh recurrent state and history, as at a reset
+                    self.policy.reset()
+                    self._history = {}
+                    self._released = True
                 with torch.inference_mode():
-                    act = self.policy(self.observation())
+                    act = self.policy(self.observation(commit=True))
                 self.actions = act.to(torch.float32).clamp(-self.task.action_clip, self.task.action_clip)
             else:
                 self.actions = torch.zeros_like(self.actions)
@@ -413,3 +441,22 @@ class Runtime:
                     stop.wait(-lag)
                 elif lag > 0.25:  # fell behind (a loaded CPU): drop the backlog instead of racing to catch up
                     next_t = time.monotonic()
+
+
+def _deployable_groups(task: EnvCfg, obs_groups: list[str]) -> dict[str, list[str]]:
+    """Group -> terms for the groups a policy reads; ``ValueError`` for a group the task lacks, a term a robot
+    cannot compute or a history below 1."""
+    groups = resolve_groups(task.observations)
+    out = {}
+    for g in obs_groups:
+        if g not in groups:
+            raise ValueError(f"the policy reads observation group {g!r}, its task has {', '.join(groups)}")
+        if int(task.observations[g].history) < 1:
+            raise ValueError(f"observation group {g!r} has history={task.observations[g].history}; must be >= 1")
+        bad = [t for t in groups[g] if t not in DEPLOYABLE_TERMS]
+        if bad:
+            raise ValueError(f"the policy observes {bad}, which this deployed robot does not compute")
+        out[g] = groups[g]
+    if not out:
+        raise ValueError("the policy reads no observation group")
+    return out

@@ -24,18 +24,23 @@ def foot_contact_sensor(foot_body: str) -> str:
     return f"floor_contact_{foot_body}"
 
 
-GHOST_GAP = 100.0
-"""Contact gap [m] of ghost obstacles: a contact is active only below -gap penetration, i.e. never."""
+GHOST_IMPEDANCE = 1.0e-4
+"""solimp d of ghost obstacle contacts (MuJoCo's lowest impedance)."""
+GHOST_SOLREF = (-1.0e-6, -1.0e-6)
+"""Direct (negative) stiffness and damping of ghost contacts: ~0, so nothing pushes the robot out."""
 
 
 def make_obstacles_ghost(model: mujoco.MjModel) -> int:
-    """Obstacle contacts stay in ``mjData.contact`` (the collision sensor counts them) but leave the solver:
-    MuJoCo's inactive contacts (``geom_gap`` > penetration). Returns the number of obstacle geoms changed."""
+    """Obstacle contacts stay in ``mjData.contact`` (the collision sensor counts them) but carry no force worth
+    the name: impedance 1e-4 and ~zero direct stiffness / damping, with a higher ``geom_priority`` so the
+    obstacle's parameters, not a mix with the robot's, set each contact. Returns the number of geoms changed."""
     body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, OBSTACLE_BODY)
     if body < 0:
         return 0
     geoms = np.flatnonzero(model.geom_bodyid == body)
-    model.geom_gap[geoms] = GHOST_GAP + model.geom_margin[geoms]
+    model.geom_solimp[geoms, 0:2] = GHOST_IMPEDANCE
+    model.geom_solref[geoms] = GHOST_SOLREF
+    model.geom_priority[geoms] = model.geom_priority.max() + 1
     return len(geoms)
 
 

@@ -21,6 +21,7 @@ from cat.envs.traversal_env import TraversalEnv
 from cat.learning.config import ALGOS, TrainCfg, check_obs_groups, policy_model, runner_cfg, student_model_cfg
 from cat.learning.distill import check_teachers, distill_runner_cfg, load_specialists
 from cat.learning.progress import BudgetReached, install_iteration_hook, quiet_constructor
+from cat.learning.warm_start import adapt_to_new_inputs
 from cat.terrain import TYPICAL_KINDS
 
 log = logging.getLogger(__name__)
@@ -304,6 +305,7 @@ def _train_in(cfg: TrainCfg, env: TraversalEnv, run_dir: Path) -> Path:
     elif cfg.init:
         runner.load(cfg.init, load_cfg={"actor": True, "critic": True}, strict=True)
         runner.current_learning_iteration = 0
+        adapt_to_new_inputs(runner.alg, env.get_observations())  # inputs the prior never saw vary (warm_start.py)
         log.info("initialised weights from %s", cfg.init)
     remaining = cfg.max_iterations - runner.current_learning_iteration
     if remaining <= 0:

@@ -216,3 +216,15 @@ def test_pool_memory_is_per_scene_not_per_env(scenes, robot_cfg):
     wm = WorldModels(models, robot_cfg, pool=4)
     assert len(wm.models) == 12 and wm.nbytes == sum(m.nbuffer for m in wm.models)
     assert wm.models[0] is models[0] and wm.models[1] is not models[0]
+
+
+def test_run_config_switch():
+    from cat.learning.hydra_cfg import load_config
+    from cat.learning.runs import make_env as make_run_env
+
+    cfg = load_config(["task=hurdle_crouch", "num_envs=4", "task.scene_variants=2", "sim.per_world_scenes=true"])
+    env = make_run_env(cfg)
+    assert env.scenes.per_world and np.all(env.scenes.offsets == 0.0)
+    wm = env.world_models
+    assert torch.equal(env.sim.model_ids // wm.pool, env.scenes.scene_of_env)
+    assert not load_config(["task=hurdle_crouch"]).sim.per_world_scenes  # tiles by default

@@ -137,12 +137,14 @@ def test_world_touches_only_its_own_scene(env, scenes):
     assert env.state.collision.tolist()[:2] == [False, True]
     sdf_free, sdf_wall = env.field.sdf[0].clone(), env.field.sdf[1].clone()
     assert sdf_free.min() > 0.2 and sdf_wall.min() < 0.0
+    pf = env.humanoid_pf[:2].clone()
 
     _place(env, [WALL, FREE])  # each env changes scene at reset: contacts and field follow
     contact = env.sim.sensor(COLLISION_SENSOR)[:2, 0]
     assert contact[0] > 0 and contact[1] == 0
     assert env.state.collision.tolist()[:2] == [True, False]
     assert env.field.sdf[0].min() < 0.0 and env.field.sdf[1].min() > 0.2
+    assert not torch.allclose(env.humanoid_pf[0], pf[0]) and not torch.allclose(env.humanoid_pf[1], pf[1])
     models = env.world_models.models
     assert env.sim.model_ids[:2].tolist() == [WALL, FREE]
     assert env.sim._shared_models[0] is models[WALL] and env.sim._shared_models[1] is models[FREE]

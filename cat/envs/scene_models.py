@@ -10,7 +10,7 @@ geoms). Hence:
 * scenes fall into *layout classes* by geom count (a class spans counts within ``group_ratio`` of its
   smallest); the MuJoCo backend runs one rollout per class present, each with that class's ``MjData``;
 * within a class every model is padded to one layout with inert geoms on the static body ``PAD_BODY``
-  (contype = conaffinity = 0, far below the floor: no contact, never in the broadphase): spheres for the geom
+  (contype = conaffinity = 0, far below the floor: they collide with nothing): spheres for the geom
   count, closed meshes of chosen face counts for the node count. A pad geom costs one pose transform per
   physics step; classes keep the padding within ``group_ratio`` of the scene's own geoms.
 
@@ -25,6 +25,7 @@ scenes x pool x one small model (the robot without visual meshes is ~80 kB), wha
 from __future__ import annotations
 
 import copy
+import logging
 import math
 from collections.abc import Sequence
 
@@ -39,6 +40,8 @@ from cat.envs.scene import env_spec, strip_visual_meshes
 from cat.envs.sim.base import state_layout
 from cat.terrain import Scene
 from cat.terrain.mujoco_export import add_obstacles_to_spec
+
+log = logging.getLogger(__name__)
 
 PAD_BODY = "obstacle_pad"
 PAD_Z = -50.0  # m: pad geoms sit far below the floor
@@ -63,6 +66,19 @@ class SceneModelError(ValueError):
 def data_layout(model: mujoco.MjModel) -> tuple[int, ...]:
     """The sizes ``MjData(model)``'s layout depends on: models with equal layouts can share one ``MjData``."""
     return tuple(int(getattr(model, n)) for n in _LAYOUT_SIZES if hasattr(model, n))
+
+
+def check_same_layout(models: Sequence[mujoco.MjModel]) -> None:
+    """Have MuJoCo confirm that ``models`` give ``MjData`` one layout (``mujoco.batch``, MuJoCo >= 4.0, checks
+    every size it allocates from; ``data_layout`` is our reading of them). Raises :class:`SceneModelError`."""
+    try:
+        from mujoco import batch
+    except ImportError:  # older MuJoCo: data_layout alone
+        return
+    try:
+        batch.Batch(models[0], nsim=len(models), nthread=1).set_models(list(models))
+    except Exception as err:  # mujoco raises a plain error naming the model index
+        raise SceneModelError(f"models of one data_layout do not share MjData's layout: {err}") from err
 
 
 def robot_sizes(model: mujoco.MjModel) -> dict[str, int]:
@@ -218,6 +234,14 @@ class WorldModels:
                 return rng[0] + (rng[1] - rng[0]) * torch.rand(*shape, generator=g)
 
             wm.set_scales(torch.stack((u(dr.kp_scale), u(dr.kd_scale), u(dr.mass_scale)), dim=-1))
+        log.info(
+            "per-world scene models: %d scenes in %d MjData layout classes, pool %d, %d models, %.1f MB",
+            wm.num_scenes,
+            wm.num_layouts,
+            wm.pool,
+            len(wm.models),
+            wm.nbytes / 2**20,
+        )
         return wm
 
     def ids(self, scene_ids: torch.Tensor, members: torch.Tensor) -> torch.Tensor:

@@ -154,7 +154,7 @@ class MujocoBackend(PhysicsBackend):
     def set_model_table(self, models: Sequence[mujoco.MjModel]) -> None:
         """Let worlds step models of ``models`` (all with this backend's state, control and sensor sizes); every
         world starts on ``models[0]``. ``assign_models`` picks each world's model."""
-        from cat.envs.scene_models import check_compatible, data_layout
+        from cat.envs.scene_models import check_compatible, check_same_layout, data_layout
 
         if self._models is not None:
             raise RuntimeError("set_model_table after per-world gains or masses were set")
@@ -162,6 +162,8 @@ class MujocoBackend(PhysicsBackend):
         check_compatible([self.model, *models], ["the backend's model"] + [f"model {i}" for i in range(len(models))])
         layouts: dict[tuple, int] = {}
         self._table_class = np.array([layouts.setdefault(data_layout(m), len(layouts)) for m in models])
+        for c in range(len(layouts)):  # rollout would write past a shared MjData's arrays otherwise
+            check_same_layout([models[i] for i in np.flatnonzero(self._table_class == c)])
         first = {c: models[int(np.flatnonzero(self._table_class == c)[0])] for c in range(len(layouts))}
         self._class_datas = [[mujoco.MjData(first[c]) for _ in range(self.nthread)] for c in range(len(layouts))]
         self._class_scratch = [mujoco.MjData(first[c]) for c in range(len(layouts))]

@@ -230,3 +230,16 @@ def test_run_config_switch():
     wm = env.world_models
     assert torch.equal(env.sim.model_ids // wm.pool, env.scenes.scene_of_env)
     assert not load_config(["task=hurdle_crouch"]).sim.per_world_scenes  # tiles by default
+
+
+def test_ghost_obstacles_in_every_table_model(scenes, fields):
+    from cat.envs.scene import GHOST_SOLREF
+
+    cfg = EnvCfg(num_envs=2, ghost_obstacles=True)
+    cfg.domain_rand.enabled, cfg.domain_rand.pool_size = True, 2
+    env = TraversalEnv(cfg, scenes=SceneSet(scenes, fields, 2, per_world=True), seed=0)
+    for m in env.world_models.models:  # every scene's pool member: obstacle contacts counted, no force
+        obstacle = m.geom_bodyid == m.body("obstacles").id
+        assert obstacle.any() and np.allclose(m.geom_solref[obstacle], GHOST_SOLREF)
+    _place(env, [WALL, FREE])
+    assert env.state.collision.tolist() == [True, False]

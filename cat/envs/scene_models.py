@@ -35,9 +35,11 @@ import torch
 import trimesh
 
 from cat.envs.config import DomainRandCfg
+from cat.envs.mdp.events import scaled_gains
 from cat.envs.robot import RobotCfg, robot_spec
 from cat.envs.scene import env_spec, strip_visual_meshes
 from cat.envs.sim.base import state_layout
+from cat.envs.sim.mujoco_backend import set_model_gains, set_model_mass_scale
 from cat.terrain import Scene
 from cat.terrain.mujoco_export import add_obstacles_to_spec
 
@@ -251,9 +253,6 @@ class WorldModels:
     def set_scales(self, scales: torch.Tensor) -> None:
         """Set every pool member's gains and masses from ``scales`` (scenes, pool, 3) = (kp, kd, mass) factors
         (the env's ``dr_scales`` convention: kp = robot kp x factor, masses = the scene model's x factor)."""
-        from cat.envs.mdp.events import scaled_gains
-        from cat.envs.sim.mujoco_backend import set_model_gains, set_model_mass_scale
-
         scales = scales.to("cpu", torch.float32)
         if scales.shape != self.scales.shape:
             raise ValueError(f"pool scales of shape {tuple(scales.shape)} do not fit {tuple(self.scales.shape)}")

@@ -6,13 +6,20 @@ Scenes repeat to reach the count (a few unique ones are generated once into ``--
 the set has its own storage in the bank, so memory and the query's memory traffic are those of the full set.
 Each scene gets 12 goal fields (a scene with fewer reachable goals repeats them; typical scenes get goals
 across the far end). The env measurement uses the bank of the whole set for fields, observations, rewards and
-episode sampling; the physics worlds hold no obstacles (every world would otherwise contain all 355 scenes'
-geoms: per-world scene models are the next step), so ``ratio`` is the cost of the scene set minus its physics.
+episode sampling; its physics worlds hold no obstacles, or with ``--per-world`` each world its own scene's
+(``sim.per_world_scenes``: one compiled model per scene).
+
+``case=scale_physics`` (``--physics-scenes``, a moderate set of the three kinds) compares the two physics
+layouts with obstacles, built and measured in the same run: tiles (every world holds every scene) against
+per-world scene models — env steps/s (and the flat task's), model memory, build time, reset cost per env.
+``case=scale_dr`` gives domain randomisation's model memory: per-world pools (scenes x ``--pool`` copies,
+built) against the tiles' per-env copy of the whole tiled model (projected from one copy).
 """
 
 from __future__ import annotations
 
 import argparse
+import copy
 import logging
 import time
 from pathlib import Path
@@ -22,6 +29,7 @@ import torch
 
 from cat.envs.bench import env_rate
 from cat.envs.config import EnvCfg
+from cat.envs.scene_models import WorldModels
 from cat.envs.scene_set import SceneSet
 from cat.envs.traversal_env import TraversalEnv
 from cat.fields import FieldBank, FieldCfg, Grid, SceneFields, SceneLayout, StaleFieldError, bank_bytes, build_fields
@@ -114,14 +122,27 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--rounds", type=int, default=4)
     p.add_argument("--repeat", type=int, default=21)
     p.add_argument("--mem-limit-gb", type=float, default=None, help="refuse a bank above this (default: RAM - 4 GB)")
+    p.add_argument("--per-world", action="store_true", help="case=scale with per-world scene models (obstacles)")
+    p.add_argument("--physics-scenes", type=int, default=24, help="case=scale_physics set size (0: skip)")
+    p.add_argument("--pool", type=int, default=8, help="domain randomisation pool per scene (case=scale_dr)")
+    p.add_argument("--only-physics", action="store_true", help="run case=scale_physics / scale_dr only")
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.WARNING)
     import warp as wp
 
     wp.config.log_level = wp.LOG_WARNING  # keep stdout to result lines
 
+    unique = unique_scenes(Path(args.data), args.dtype)
+    torch.set_num_threads(1)
+    if args.physics_scenes > 0:
+        physics_case(unique, args)
+    if not args.only_physics:
+        scale_case(unique, args)
+
+
+def scale_case(unique: dict[str, list[Path]], args: argparse.Namespace) -> None:
     counts = {"typical": args.typical, "procedural": args.procedural, "indoor": args.indoor}
-    folders = scene_list(unique_scenes(Path(args.data), args.dtype), counts)
+    folders = scene_list(unique, counts)
     scenes_u = {f: Scene.load(f) for f in set(folders)}
     layouts = []
     for f in folders:
@@ -137,13 +158,14 @@ def main(argv: list[str] | None = None) -> None:
     if mb[args.dtype] / 1024 > limit:
         raise SystemExit(f"bank of {mb[args.dtype] / 1024:.1f} GB exceeds --mem-limit-gb {limit:.1f}")
 
-    torch.set_num_threads(1)
-
     def load(i: int) -> SceneFields:  # every entry reads its file, as a set of distinct scenes would
         return SceneFields.load(Scene.fields_dir(folders[i]) / STORE_FILE, FieldCfg())
 
     t = time.perf_counter()
-    sset = _FieldsOnly([scenes_u[f] for f in folders], load, args.envs, dtype=args.dtype)
+    if args.per_world:
+        sset = SceneSet([Scene.load(f) for f in folders], load, args.envs, dtype=args.dtype, per_world=True)
+    else:
+        sset = _FieldsOnly([scenes_u[f] for f in folders], load, args.envs, dtype=args.dtype)
     load_s = time.perf_counter() - t
     q = query_ms(sset.bank, args.query_envs, args.repeat)
     env = TraversalEnv(EnvCfg(num_envs=args.envs), sim="mujoco", scenes=sset, seed=0)
@@ -156,9 +178,70 @@ def main(argv: list[str] | None = None) -> None:
     print(
         f"case=scale scenes={len(folders)} goals={GOALS} bank_mb={sset.bank.nbytes / 2**20:.0f} load_s={load_s:.1f}"
         f" query_ms={q:.2f} env_steps_per_s={rate:.0f} flat_env_steps_per_s={flat_rate:.0f}"
-        f" ratio={rate / flat_rate:.2f}",
+        f" ratio={rate / flat_rate:.2f} physics={'per_world' if args.per_world else 'none'}",
         flush=True,
     )
+
+
+def physics_case(unique: dict[str, list[Path]], args: argparse.Namespace) -> None:
+    """Tiles against per-world scene models on ``--physics-scenes`` scenes (a third of each kind)."""
+    k = max(1, args.physics_scenes // len(UNIQUE))
+    folders = scene_list(unique, {kind: k for kind in UNIQUE})
+    scenes = [Scene.load(f) for f in folders]  # one object per entry, as distinct scenes
+
+    def load(i: int) -> SceneFields:
+        return SceneFields.load(Scene.fields_dir(folders[i]) / STORE_FILE, FieldCfg())
+
+    envs, build_s = {}, {}
+    for mode in ("tiles", "per_world"):
+        t = time.perf_counter()
+        sset = SceneSet(scenes, load, args.envs, dtype=args.dtype, per_world=mode == "per_world")
+        envs[mode] = TraversalEnv(EnvCfg(num_envs=args.envs), sim="mujoco", scenes=sset, seed=0)
+        build_s[mode] = time.perf_counter() - t
+    envs["flat"] = TraversalEnv(EnvCfg(num_envs=args.envs), sim="mujoco", seed=0)
+    rates: dict[str, list[float]] = {m: [] for m in envs}
+    for _ in range(args.rounds):  # interleaved: both see the same machine load
+        for m, env in envs.items():
+            rates[m].append(env_rate(env, args.seconds / args.rounds))
+    rate = {m: float(np.median(r)) for m, r in rates.items()}
+    reset = {m: reset_us(env) for m, env in envs.items() if m != "flat"}
+    tiles, wm = envs["tiles"], envs["per_world"].world_models
+    tile_mb, scene_mb = tiles.sim.model.nbuffer / 2**20, wm.nbytes / 2**20
+    print(
+        f"case=scale_physics scenes={len(scenes)} envs={args.envs} layouts={envs['per_world'].sim.num_layouts}"
+        f" tiles_env_steps_per_s={rate['tiles']:.0f} per_world_env_steps_per_s={rate['per_world']:.0f}"
+        f" ratio={rate['per_world'] / rate['tiles']:.2f} flat_env_steps_per_s={rate['flat']:.0f}"
+        f" tile_model_mb={tile_mb:.1f} per_world_models_mb={scene_mb:.1f}"
+        f" build_s_tiles={build_s['tiles']:.1f} build_s_per_world={build_s['per_world']:.1f}"
+        f" reset_us_tiles={reset['tiles']:.0f} reset_us_per_world={reset['per_world']:.0f}",
+        flush=True,
+    )
+    # domain randomisation: a pool of --pool copies per scene, against a per-env copy of the tiled model
+    t = time.perf_counter()
+    pool = WorldModels([copy.deepcopy(m) for m in wm.models], tiles.robot, pool=args.pool)
+    pool.set_scales(0.75 + 0.5 * torch.rand(len(scenes), args.pool, 3))
+    pool_s = time.perf_counter() - t
+    t = time.perf_counter()
+    copy.deepcopy(tiles.sim.model)
+    tile_copy_s = time.perf_counter() - t
+    print(
+        f"case=scale_dr scenes={len(scenes)} envs={args.envs} pool={args.pool} pool_models={len(pool.models)}"
+        f" pool_mb={pool.nbytes / 2**20:.0f} pool_build_s={pool_s:.2f}"
+        f" tiles_dr_mb={args.envs * tile_mb:.0f} tiles_dr_copy_s={args.envs * tile_copy_s:.1f}",
+        flush=True,
+    )
+
+
+def reset_us(env: TraversalEnv, batch: int = 64, repeat: int = 8) -> float:
+    """Median µs per env of ``reset_idx`` on ``batch`` random envs (scene pick, model swap, forward, field)."""
+    gen = torch.Generator().manual_seed(1)
+    times = []
+    for _ in range(repeat):
+        ids = torch.randperm(env.num_envs, generator=gen)[:batch]
+        t = time.perf_counter()
+        env.reset_idx(ids)
+        times.append((time.perf_counter() - t) / len(ids))
+    return 1e6 * float(np.median(times))
 
 
 def _mem_available_gb() -> float:

@@ -134,6 +134,8 @@ class DomainRandCfg:
     kp_scale: tuple[float, float] = (0.75, 1.25)
     kd_scale: tuple[float, float] = (0.75, 1.25)
     mass_scale: tuple[float, float] = (0.9, 1.1)
+    # per-world scenes (sim.per_world_scenes): randomised model copies per scene; an env draws one at reset
+    pool_size: int = 8
 
 
 @dataclass

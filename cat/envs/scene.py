@@ -55,9 +55,23 @@ def build_env_model(
     Sensors added (world frame): position and linear velocity of each query site, floor contact count per
     foot, and (when the spec has an ``obstacles`` body) the number of robot-obstacle contacts.
     """
-    spec = robot_spec(robot)
-    if not visual_meshes:
-        strip_visual_meshes(spec)
+    return compile_model(env_spec(robot, add_obstacles, visual_meshes))
+
+
+def env_spec(
+    robot: RobotCfg,
+    add_obstacles: Callable[[mujoco.MjSpec], None] | None = None,
+    visual_meshes: bool = False,
+    base: mujoco.MjSpec | None = None,
+) -> mujoco.MjSpec:
+    """The spec ``build_env_model`` compiles. ``base``: a robot spec (``robot_spec``, visual meshes already
+    handled) to start from, copied, so many scene models skip reading the robot again."""
+    if base is not None:
+        spec = base.copy()
+    else:
+        spec = robot_spec(robot)
+        if not visual_meshes:
+            strip_visual_meshes(spec)
     if add_obstacles is not None:
         add_obstacles(spec)
     for site in robot.query_site_names:
@@ -95,7 +109,7 @@ def build_env_model(
             refname=OBSTACLE_BODY,
             intprm=found,
         )
-    return compile_model(spec)
+    return spec
 
 
 def strip_visual_meshes(spec: mujoco.MjSpec) -> None:

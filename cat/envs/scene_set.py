@@ -3,10 +3,16 @@
 Scenes may differ in grid shape (typical, procedural and indoor in one set): the bank stores d and ∇d once
 per scene and F once per goal.
 
-All scenes live in every world, side by side on a grid of tiles (``tile_spacing`` apart); env ``i`` trains in
-scene ``i % num_scenes``, so one compiled model serves both backends and obstacles of other tiles are never
-reached. Fields come from the scene folders (``fields/humanoid_pf.npz``, written by ``scripts/gen_scenes.py``) or
-are built on load; their grid origins are shifted by the tile offset into the shared world frame.
+Two layouts of the physics worlds (``per_world``, the run's ``sim.per_world_scenes``):
+
+* tiles (default): all scenes live in every world, side by side on a grid of tiles (``tile_spacing`` apart); one
+  compiled model serves both backends and obstacles of other tiles are never reached;
+* per world: each world holds only its own scene, in the scene's frame (every offset is zero); one compiled model
+  per scene (``cat.envs.scene_models``), swapped per world when an env changes scene at reset (``sim=mujoco``).
+
+Env ``i`` starts in scene ``i % num_scenes``. Fields come from the scene folders (``fields/humanoid_pf.npz``,
+written by ``scripts/gen_scenes.py``) or are built on load; their grid origins are shifted by the scene's offset
+into the world frame.
 """
 
 from __future__ import annotations
@@ -70,19 +76,24 @@ class SceneSet:
         device: str = "cpu",
         tile_margin: float = 2.0,
         dtype: str = "float32",
+        per_world: bool = False,
     ):
         """``fields[s]`` (or ``fields(s)``, called once per scene while the bank fills) are scene ``s``'s goal
-        fields on its own grid; scenes may have different grid shapes. ``dtype`` is the bank storage."""
+        fields on its own grid; scenes may have different grid shapes. ``dtype`` is the bank storage.
+        ``per_world``: each world holds only its own scene, at zero offset (else all scenes on tiles)."""
         if not scenes:
             raise SceneSetError("no scenes given")
         self.scenes, self.num_envs, self.device = scenes, num_envs, torch.device(device)
+        self.per_world = bool(per_world)
         extent = max(float(np.max(s.bounds[1, :2] - s.bounds[0, :2])) for s in scenes)
         self.tile_spacing = extent + tile_margin
         cols = math.ceil(math.sqrt(len(scenes)))
-        # tile offset chosen so each scene's own frame is kept, shifted to its tile
+        # tile offset chosen so each scene's own frame is kept, shifted to its tile; none per world
         self.offsets = np.array(
             [[(i % cols) * self.tile_spacing, (i // cols) * self.tile_spacing, 0.0] for i in range(len(scenes))]
         )
+        if self.per_world:
+            self.offsets[:] = 0.0
         layouts = []
         for s in scenes:
             g = s.grid()
@@ -116,6 +127,7 @@ class SceneSet:
         field_cfg: FieldCfg | None = None,
         dtype: str = "float32",
         on_stale: str = "rebuild",
+        per_world: bool = False,
     ) -> SceneSet:
         """Every scene folder (with ``scene.json``) under ``path``, optionally only those of ``kind``; grid
         shapes may differ. Fields are read (or built) one scene at a time while the bank fills; saved fields
@@ -140,7 +152,7 @@ class SceneSet:
             return scene_fields(scenes[i], folders[i], field_cfg, on_stale)
 
         try:
-            return cls(scenes, load, num_envs, device, dtype=dtype)
+            return cls(scenes, load, num_envs, device, dtype=dtype, per_world=per_world)
         finally:
             bar.close()
 
@@ -153,17 +165,20 @@ class SceneSet:
         seed: int = 0,
         device: str = "cpu",
         field_cfg: FieldCfg | None = None,
+        per_world: bool = False,
     ) -> SceneSet:
         """The paper's typical scenes of ``kind`` (or of each of several kinds: one scene group per kind)
         built on the fly (no dataset needed)."""
         kinds = [kind] if isinstance(kind, str) else list(kind)
         scenes = [s for k in kinds for s in typical_variants(k, variants, seed)]
-        return cls(scenes, lambda i: scene_fields(scenes[i], None, field_cfg), num_envs, device)
+        return cls(scenes, lambda i: scene_fields(scenes[i], None, field_cfg), num_envs, device, per_world=per_world)
 
     # --- env hooks ----------------------------------------------------------------------------------------
     def add_to_spec(self, spec: mujoco.MjSpec) -> None:
         """Add every scene's obstacles (convex parts, or voxel height fields and boxes), shifted to its tile,
-        under the ``obstacles`` body."""
+        under the ``obstacles`` body (tiles only: per world, each scene has its own model)."""
+        if self.per_world:
+            raise SceneSetError("a per-world scene set has one model per scene (cat.envs.scene_models), no tiles")
         for scene, off in zip(self.scenes, self.offsets, strict=True):
             add_obstacles_to_spec(spec, scene, offset=off)
 

@@ -37,7 +37,7 @@ from cat.envs.scene import (
     query_pos_sensor,
     query_vel_sensor,
 )
-from cat.envs.sim import make_backend
+from cat.envs.sim import check_per_world, make_backend
 from cat.eval.metrics import TrialMetrics, horizontal_distance
 from cat.fields import FieldCfg, humanoid_pf
 
@@ -88,10 +88,22 @@ class TraversalEnv(VecEnv):
         self._command_direction = command_source(cfg.command.source)
         rew_terms.heading_gate(cfg.rewards.params.heading_gate)
 
-        model = build_env_model(self.robot, scenes.add_to_spec if scenes is not None else None)
+        self.world_models = None  # per-world scene models (scenes.per_world), cat.envs.scene_models
+        if scenes is not None and scenes.per_world:
+            from cat.envs.scene_models import WorldModels
+
+            check_per_world(sim)
+            self.world_models = WorldModels.build(self.robot, scenes.scenes, cfg.domain_rand, seed)
+            models = self.world_models.models
+        else:
+            models = [build_env_model(self.robot, scenes.add_to_spec if scenes is not None else None)]
         if cfg.ghost_obstacles:
-            make_obstacles_ghost(model)
+            for m in models:
+                make_obstacles_ghost(m)
+        model = models[0]
         self.sim = make_backend(sim, model, self.num_envs, self.robot.decimation, device=device)
+        if self.world_models is not None:
+            self.sim.set_model_table(self.world_models.models)
         self.device = self.sim.device
         self.field = None
         self.curriculum = None
@@ -369,6 +381,8 @@ class TraversalEnv(VecEnv):
             snap["scene_of_env"] = self.scenes.scene_of_env.clone()
             snap["goal_idx"] = self.scenes._goal_idx.clone()
             snap["field_idx"] = self.field_source.field_idx.clone()
+        if self.world_models is not None:  # per-world scenes (which model each world steps: snap["sim"])
+            snap["world_model_scales"] = self.world_models.scales.clone()
         return snap
 
     def set_state(self, snap: dict) -> None:
@@ -383,13 +397,19 @@ class TraversalEnv(VecEnv):
             raise ValueError(f"env snapshot of {snap['targets'].shape[0]} envs cannot restore {self.num_envs} envs")
         if set(snap["episode_sums"]) != set(self.episode_sums):
             raise ValueError("env snapshot has other reward terms than this env")
+        if "world_model_scales" in snap and self.world_models is None:
+            raise ValueError("env snapshot of per-world scenes (sim.per_world_scenes=true) cannot restore tiles")
+        if self.world_models is not None and snap["world_model_scales"].shape != self.world_models.scales.shape:
+            raise ValueError("env snapshot has another per-world model pool (scenes x domain_rand.pool_size)")
         for name in self._SNAPSHOT:
             getattr(self, name).copy_(snap[name])
         for k, v in snap["episode_sums"].items():
             self.episode_sums[k].copy_(v)
         self.trial.load_state_dict(snap["trial"])
         self.common_step = snap["common_step"]
-        if self.cfg.domain_rand.enabled:
+        if self.world_models is not None:
+            self.world_models.set_scales(snap["world_model_scales"])
+        elif self.cfg.domain_rand.enabled:
             events.apply_physics_scales(self, torch.arange(self.num_envs), self.dr_scales)
         self.sim.set_state(snap["sim"])
         if self.scenes is not None:
@@ -462,7 +482,9 @@ class TraversalEnv(VecEnv):
         qpos[:, 3:7] = yaw_quat(yaw).double()
         qpos[:, 7:] += uniform(-0.05, 0.05, k, self.robot.num_joints).double()
         qvel = torch.zeros(k, self.sim.model.nv, device=dev, dtype=torch.float64)
-        if self.cfg.domain_rand.enabled:
+        if self.world_models is not None:  # the scene's model (a randomised pool member with domain_rand)
+            events.assign_world_models(self, env_ids)
+        elif self.cfg.domain_rand.enabled:
             events.randomise_physics(self, env_ids)
         self.sim.reset(env_ids, qpos, qvel)
 

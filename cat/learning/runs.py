@@ -65,12 +65,13 @@ def make_env(cfg: TrainCfg, num_envs: int | None = None) -> TraversalEnv:
     if task.scene_dir or task.scene_kind or task.scene_groups:
         from cat.envs.scene_set import SceneSet
 
+        kw = dict(device=cfg.sim.device, per_world=cfg.sim.per_world_scenes)
         if task.scene_groups and not task.scene_dir:
-            scenes = SceneSet.typical(task.scene_groups, n, task.scene_variants, task.scene_seed, device=cfg.sim.device)
+            scenes = SceneSet.typical(task.scene_groups, n, task.scene_variants, task.scene_seed, **kw)
         elif task.scene_dir:
-            scenes = SceneSet.from_dir(task.scene_dir, num_envs=n, device=cfg.sim.device, kind=task.scene_kind)
+            scenes = SceneSet.from_dir(task.scene_dir, num_envs=n, kind=task.scene_kind, **kw)
         else:
-            scenes = SceneSet.typical(task.scene_kind, n, task.scene_variants, task.scene_seed, device=cfg.sim.device)
+            scenes = SceneSet.typical(task.scene_kind, n, task.scene_variants, task.scene_seed, **kw)
     return TraversalEnv(task, sim=cfg.sim.backend, device=cfg.sim.device, scenes=scenes, seed=cfg.seed)
 
 

@@ -10,6 +10,21 @@ from cat.envs.scene import COLLISION_SENSOR
 from cat.envs.sim.base import PhysicsBackend
 
 BACKENDS = ("mujoco", "warp")
+PER_WORLD_BACKENDS = ("mujoco",)
+
+
+def check_per_world(name: str) -> None:
+    """Per-world scene models (``sim.per_world_scenes``) need ``sim=mujoco``; raise a clear error otherwise."""
+    if name == "warp":
+        raise NotImplementedError(
+            "sim.per_world_scenes=true needs sim=mujoco. mujoco_warp 4.0 steps every world on one Model: it "
+            "batches some fields per world (geom_dataid, geom_pos/quat/size/aabb, actuator gains, body masses) "
+            "but not geom types or counts, so per-scene models cannot be swapped in (docs/scenes.md, 'Per-world "
+            "scenes', describes the slot model that would be needed). With sim=warp use "
+            "sim.per_world_scenes=false (scenes side by side on tiles)."
+        )
+    if name not in PER_WORLD_BACKENDS:
+        raise ValueError(f"unknown sim backend {name!r}; valid: {', '.join(BACKENDS)}")
 
 
 def make_backend(

@@ -109,6 +109,15 @@ class PhysicsBackend(ABC):
         self.reset(torch.arange(self.num_envs), state["qpos"], state["qvel"])
         self._sens.copy_(state["sensordata"].to(self._sens))
 
+    # --- per-world models (sim.per_world_scenes) ---------------------------------------------------------
+    def set_model_table(self, models: Sequence[mujoco.MjModel]) -> None:
+        """Let each world step its own model of ``models`` (``assign_models``); backends that cannot raise."""
+        raise NotImplementedError(f"{type(self).__name__} does not support per-world models")
+
+    def assign_models(self, env_ids: torch.Tensor, model_ids: torch.Tensor) -> None:
+        """World ``env_ids[k]`` steps ``models[model_ids[k]]`` of the table from its next reset on."""
+        raise NotImplementedError(f"{type(self).__name__} does not support per-world models")
+
     # --- domain randomisation -------------------------------------------------------------------------
     def set_actuator_gains(self, env_ids: torch.Tensor, kp: torch.Tensor, kd: torch.Tensor) -> None:
         """Per-world PD gains (k, nu); backends that cannot randomise raise ``NotImplementedError``."""

@@ -305,6 +305,11 @@ class WarpBackend(PhysicsBackend):
             yield
         caller.wait_stream(self._stream)
 
+    def set_model_table(self, models) -> None:
+        from cat.envs.sim import check_per_world
+
+        check_per_world("warp")
+
     # --- domain randomisation: per-world model arrays ---------------------------------------------------
     def set_actuator_gains(self, env_ids: torch.Tensor, kp: torch.Tensor, kd: torch.Tensor) -> None:
         ids = torch.as_tensor(env_ids, device=self.device, dtype=torch.long).reshape(-1)

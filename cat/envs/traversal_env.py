@@ -16,6 +16,7 @@ from rsl_rl.env import VecEnv
 from tensordict import TensorDict
 
 from cat.envs import field_source as fsrc
+from cat.envs import snapshot
 from cat.envs.config import EnvCfg
 from cat.envs.curriculum import DifficultyCurriculum
 from cat.envs.field_source import FieldSample
@@ -358,69 +359,13 @@ class TraversalEnv(VecEnv):
         if self.curriculum is not None and "curriculum" in state:
             self.curriculum.load_state_dict(state["curriculum"])
 
-    _SNAPSHOT = (
-        "targets", "actions", "prev_actions", "goals", "phase", "gait_freq", "episode_length_buf", "step_count",
-        "push_timer", "field_obs_buf", "kp", "kd", "dr_scales",
-    )  # fmt: skip
-
-    SNAPSHOT_FORMAT = 2  # bump when get_state's content changes
-
     def get_state(self) -> dict:
-        """Everything that makes the next step of every env what it would have been: physics, episode
-        bookkeeping, scene/goal assignment and the current observations (an exact training resume)."""
-        snap = {name: getattr(self, name).clone() for name in self._SNAPSHOT}
-        snap["format"] = self.SNAPSHOT_FORMAT
-        snap["episode_sums"] = {k: v.clone() for k, v in self.episode_sums.items()}
-        snap["trial"] = self.trial.state_dict()
-        snap["common_step"] = self.common_step
-        snap["sim"] = self.sim.get_state()
-        snap["obs"] = self.obs_buf.clone()
-        if self.observation_groups.buffers:  # groups with history (absent otherwise: older snapshots stay valid)
-            snap["obs_history"] = self.observation_groups.state_dict()
-        if self.scenes is not None:
-            snap["scene_of_env"] = self.scenes.scene_of_env.clone()
-            snap["goal_idx"] = self.scenes._goal_idx.clone()
-            snap["field_idx"] = self.field_source.field_idx.clone()
-        if self.world_models is not None:  # per-world scenes (which model each world steps: snap["sim"])
-            snap["world_model_scales"] = self.world_models.scales.clone()
-        return snap
+        """Everything that makes the next step of every env what it would have been (``cat.envs.snapshot``)."""
+        return snapshot.get_state(self)
 
     def set_state(self, snap: dict) -> None:
         """Restore ``get_state``'s snapshot (same task and number of envs); checked before anything changes."""
-        if snap.get("format") != self.SNAPSHOT_FORMAT:
-            raise ValueError(f"env snapshot format {snap.get('format')} is not this code's {self.SNAPSHOT_FORMAT}")
-        current = self.get_state()
-        missing = sorted(set(current) - set(snap))
-        if missing:
-            raise ValueError(f"env snapshot lacks {', '.join(missing)}")
-        if snap["targets"].shape != self.targets.shape:
-            raise ValueError(f"env snapshot of {snap['targets'].shape[0]} envs cannot restore {self.num_envs} envs")
-        if set(snap["episode_sums"]) != set(self.episode_sums):
-            raise ValueError("env snapshot has other reward terms than this env")
-        if "world_model_scales" in snap and self.world_models is None:
-            raise ValueError("env snapshot of per-world scenes (sim.per_world_scenes=true) cannot restore tiles")
-        if self.world_models is not None and snap["world_model_scales"].shape != self.world_models.scales.shape:
-            raise ValueError("env snapshot has another per-world model pool (scenes x domain_rand.pool_size)")
-        for name in self._SNAPSHOT:
-            getattr(self, name).copy_(snap[name])
-        for k, v in snap["episode_sums"].items():
-            self.episode_sums[k].copy_(v)
-        self.trial.load_state_dict(snap["trial"])
-        self.common_step = snap["common_step"]
-        if self.world_models is not None:
-            self.world_models.set_scales(snap["world_model_scales"])
-        elif self.cfg.domain_rand.enabled:
-            events.apply_physics_scales(self, torch.arange(self.num_envs), self.dr_scales)
-        self.sim.set_state(snap["sim"])
-        if self.scenes is not None:
-            self.scenes.scene_of_env.copy_(snap["scene_of_env"])
-            self.scenes._goal_idx.copy_(snap["goal_idx"])
-            self.field_source.field_idx.copy_(snap["field_idx"])
-        self._update_state()
-        self._update_field()
-        self.obs_buf = snap["obs"].clone()
-        if "obs_history" in snap:
-            self.observation_groups.load_state_dict(snap["obs_history"])
+        snapshot.set_state(self, snap)
 
     # --- resets ------------------------------------------------------------------------------------------
     def reset_idx(self, env_ids: torch.Tensor) -> None:

@@ -1,0 +1,80 @@
+"""Env snapshots: everything that makes the next step of every env what it would have been (physics, episode
+bookkeeping, scene / goal / model assignment, observations and their history), for an exact training resume
+(``env_<it>.pt`` beside a checkpoint, ``cat.learning.runs``)."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import torch
+
+from cat.envs.mdp import events
+
+if TYPE_CHECKING:
+    from cat.envs.traversal_env import TraversalEnv
+
+FIELDS = (
+    "targets", "actions", "prev_actions", "goals", "phase", "gait_freq", "episode_length_buf", "step_count",
+    "push_timer", "field_obs_buf", "kp", "kd", "dr_scales",
+)  # fmt: skip
+
+FORMAT = 2  # bump when get_state's content changes
+
+
+def get_state(env: TraversalEnv) -> dict:
+    """Everything that makes the next step of every env what it would have been: physics, episode
+    bookkeeping, scene/goal assignment and the current observations (an exact training resume)."""
+    snap = {name: getattr(env, name).clone() for name in FIELDS}
+    snap["format"] = FORMAT
+    snap["episode_sums"] = {k: v.clone() for k, v in env.episode_sums.items()}
+    snap["trial"] = env.trial.state_dict()
+    snap["common_step"] = env.common_step
+    snap["sim"] = env.sim.get_state()
+    snap["obs"] = env.obs_buf.clone()
+    if env.observation_groups.buffers:  # groups with history (absent otherwise: older snapshots stay valid)
+        snap["obs_history"] = env.observation_groups.state_dict()
+    if env.scenes is not None:
+        snap["scene_of_env"] = env.scenes.scene_of_env.clone()
+        snap["goal_idx"] = env.scenes._goal_idx.clone()
+        snap["field_idx"] = env.field_source.field_idx.clone()
+    if env.world_models is not None:  # per-world scenes (which model each world steps: snap["sim"])
+        snap["world_model_scales"] = env.world_models.scales.clone()
+    return snap
+
+
+def set_state(env: TraversalEnv, snap: dict) -> None:
+    """Restore ``get_state``'s snapshot (same task and number of envs); checked before anything changes."""
+    if snap.get("format") != FORMAT:
+        raise ValueError(f"env snapshot format {snap.get('format')} is not this code's {FORMAT}")
+    current = get_state(env)
+    missing = sorted(set(current) - set(snap))
+    if missing:
+        raise ValueError(f"env snapshot lacks {', '.join(missing)}")
+    if snap["targets"].shape != env.targets.shape:
+        raise ValueError(f"env snapshot of {snap['targets'].shape[0]} envs cannot restore {env.num_envs} envs")
+    if set(snap["episode_sums"]) != set(env.episode_sums):
+        raise ValueError("env snapshot has other reward terms than this env")
+    if "world_model_scales" in snap and env.world_models is None:
+        raise ValueError("env snapshot of per-world scenes (sim.per_world_scenes=true) cannot restore tiles")
+    if env.world_models is not None and snap["world_model_scales"].shape != env.world_models.scales.shape:
+        raise ValueError("env snapshot has another per-world model pool (scenes x domain_rand.pool_size)")
+    for name in FIELDS:
+        getattr(env, name).copy_(snap[name])
+    for k, v in snap["episode_sums"].items():
+        env.episode_sums[k].copy_(v)
+    env.trial.load_state_dict(snap["trial"])
+    env.common_step = snap["common_step"]
+    if env.world_models is not None:
+        env.world_models.set_scales(snap["world_model_scales"])
+    elif env.cfg.domain_rand.enabled:
+        events.apply_physics_scales(env, torch.arange(env.num_envs), env.dr_scales)
+    env.sim.set_state(snap["sim"])
+    if env.scenes is not None:
+        env.scenes.scene_of_env.copy_(snap["scene_of_env"])
+        env.scenes._goal_idx.copy_(snap["goal_idx"])
+        env.field_source.field_idx.copy_(snap["field_idx"])
+    env._update_state()
+    env._update_field()
+    env.obs_buf = snap["obs"].clone()
+    if "obs_history" in snap:
+        env.observation_groups.load_state_dict(snap["obs_history"])

@@ -94,3 +94,22 @@ def test_contact_with_an_obstacle_costs_reward():
     assert env.episode_sums["collision"][0] <= env.cfg.rewards.collision < 0
     assert env.episode_sums["sdf_barrier"][0] < -1.0
     assert math.isfinite(float(env.episode_sums["sdf_barrier"][0]))
+
+
+def test_foot_clearance_min_only_lets_feet_clear_a_hurdle(flat_env):
+    env = flat_env
+    env.step(torch.zeros(4, env.num_actions))
+    params = env.cfg.rewards.params
+    swing = ~rew._stance(env)
+    if not swing.any():
+        pytest.skip("no swing foot in this state")
+    env.state.foot_vel[..., :2] = 1.0
+    env.state.foot_pos[..., 2] = params.foot_clearance + 0.1  # 17 cm: over an 8-15 cm bar
+    assert (rew.feet_clearance(env) > 0).any()  # the release's two-sided term punishes hurdling
+    params.foot_clearance_min_only = True
+    try:
+        assert torch.equal(rew.feet_clearance(env), torch.zeros(4))
+        env.state.foot_pos[..., 2] = params.foot_clearance - 0.05  # too low is still penalised
+        assert (rew.feet_clearance(env) > 0).any()
+    finally:
+        params.foot_clearance_min_only = False

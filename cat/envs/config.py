@@ -154,6 +154,9 @@ class RewardParamsCfg:
     standing_speed: float = 0.05  # commands slower than this mean "stand": no heading term, both feet in stance [m/s]
     proximity_scale: float = 0.3  # goal_proximity: exp(-d / scale) [m]
     foot_clearance: float = 0.07  # feet_clearance: swing-foot target height [m]
+    # feet_clearance penalises only swing feet *below* the target (a hurdle needs more than 7 cm; the two-sided
+    # release term trains the feet to graze an 8 cm bar). Off (two-sided) for flat ground, on for obstacle tasks.
+    foot_clearance_min_only: bool = False
     knee_min: float = 0.2  # knee_straight: penalise knee angles below this [rad]
     barrier_margin: float = 0.05  # sdf_barrier: softplus((margin - d) / width) at each query link [m]
     barrier_width: float = 0.02  # [m]; map_clearance uses the same margin and width on the elevation map

@@ -125,11 +125,16 @@ def feet_phase_contact(env: TraversalEnv) -> torch.Tensor:
 
 
 def feet_clearance(env: TraversalEnv) -> torch.Tensor:
-    """Swing feet should lift to ``params.foot_clearance`` (weighted by their horizontal speed)."""
+    """Swing feet should lift to ``params.foot_clearance`` (weighted by their horizontal speed); with
+    ``params.foot_clearance_min_only`` only a foot below it is penalised (higher is free: hurdles)."""
+    p = env.cfg.rewards.params
     swing = ~_stance(env)
     z = env.state.foot_pos[..., 2]
     speed = env.state.foot_vel[..., :2].norm(dim=-1)
-    return ((z - env.cfg.rewards.params.foot_clearance).square() * speed * swing).sum(dim=-1)
+    error = z - p.foot_clearance
+    if p.foot_clearance_min_only:
+        error = error.clamp_max(0.0)
+    return (error.square() * speed * swing).sum(dim=-1)
 
 
 def feet_slip(env: TraversalEnv) -> torch.Tensor:

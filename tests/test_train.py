@@ -129,3 +129,15 @@ def test_missing_checkpoint_is_clear(tmp_path):
         timeout=120,
     )
     assert out.returncode == 2 and "checkpoint not found" in out.stderr
+
+
+def test_torchrun_maps_each_rank_to_its_gpu_and_seed():
+    from cat.learning.config import SimCfg, TrainCfg
+    from cat.learning.runs import for_this_rank
+
+    cfg = TrainCfg(sim=SimCfg(backend="warp", device="cuda"), seed=3)
+    assert for_this_rank(cfg, {}) is cfg  # single process: unchanged
+    ranked = for_this_rank(cfg, {"WORLD_SIZE": "2", "RANK": "1", "LOCAL_RANK": "1"})
+    assert ranked.sim.device == "cuda:1" and ranked.seed == 4
+    with pytest.raises(ValueError, match="needs sim.device=cuda"):
+        for_this_rank(TrainCfg(seed=0), {"WORLD_SIZE": "2", "RANK": "0", "LOCAL_RANK": "0"})

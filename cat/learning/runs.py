@@ -57,6 +57,23 @@ def set_torch_threads(threads: int) -> None:
         torch.set_num_threads(threads)
 
 
+def for_this_rank(cfg: TrainCfg, environ: dict | None = None) -> TrainCfg:
+    """Under ``torchrun`` (``WORLD_SIZE`` > 1: rsl_rl's multi-GPU PPO, one process per GPU), ``sim.device=cuda``
+    becomes this process's ``cuda:<LOCAL_RANK>`` (rsl_rl requires exactly that) and the seed is offset by
+    ``RANK`` so the processes explore differently. Single-process runs are returned unchanged."""
+    env = os.environ if environ is None else environ
+    world = int(env.get("WORLD_SIZE", "1"))
+    if world <= 1:
+        return cfg
+    rank, local = int(env.get("RANK", "0")), int(env.get("LOCAL_RANK", "0"))
+    device = cfg.sim.device
+    if device == "cuda":
+        device = f"cuda:{local}"
+    if device != f"cuda:{local}":
+        raise ValueError(f"torchrun (WORLD_SIZE={world}) needs sim.device=cuda (or cuda:{local}), got {device!r}")
+    return replace(cfg, sim=replace(cfg.sim, device=device), seed=cfg.seed + rank)
+
+
 def make_env(cfg: TrainCfg, num_envs: int | None = None) -> TraversalEnv:
     """The env of a run config (``num_envs`` overrides both the task's and the run's)."""
     n = num_envs or cfg.num_envs or cfg.task.num_envs
@@ -279,6 +296,7 @@ def train(cfg: TrainCfg) -> Path:
     passes the budget and saves it, so one training can span several sittings.
     """
     validate_train_cfg(cfg)
+    cfg = for_this_rank(cfg)
     torch.manual_seed(cfg.seed)
     set_torch_threads(cfg.torch_threads)
     env = make_env(cfg)  # before any folder exists: a bad scene or model leaves nothing behind

@@ -12,7 +12,7 @@ import torch
 from cat.envs.config import ACTOR_TERMS, EnvCfg, ObsGroupCfg
 from cat.learning.config import AlgoCfg, DistillCfg, TrainCfg, policy_model
 from cat.learning.distill import MultiTeacher, TeacherError, check_teachers, load_specialists
-from cat.learning.runs import load_policy, make_env, save_config, train
+from cat.learning.runs import load_policy, make_env, resume_config, save_config, train
 
 KINDS = ["hurdle-crouch", "side-pass"]
 
@@ -154,3 +154,18 @@ def test_small_dagger_run_lowers_the_loss_and_the_student_plays(teachers, tmp_pa
         actions = policy(obs)
         assert actions.shape == (2, play_env.num_actions) and torch.isfinite(actions).all()
         obs, *_ = play_env.step(actions)
+
+
+def test_distillation_resumes_in_its_own_folder(teachers, tmp_path):
+    cfg = _generalist_cfg(teachers)
+    cfg.max_iterations, cfg.run_dir = 2, str(tmp_path / "run")
+    run = train(cfg)
+    assert (run / "model_1.pt").is_file() and (run / "env_1.pt").is_file()
+    resumed = resume_config(run / "model_1.pt", ["max_iterations=4"])
+    assert resumed.algo.name == "distill" and resumed.teachers == teachers
+    assert train(resumed) == run
+    assert (run / "model_3.pt").is_file()
+    its = [int(r["iteration"]) for r in csv.DictReader(open(run / "metrics.csv")) if r["tag"] == "Loss/behavior"]
+    assert its == [0, 1, 2, 3]  # the iteration count continues
+    history = torch.load(run / "env_3.pt", weights_only=False)["obs_history"]
+    assert set(history) == {"student_proprio"}  # the student's observation history travels with the snapshot

@@ -36,6 +36,16 @@ def test_resume_gives_the_same_next_update(tmp_path):
     assert a["optimizer_state_dict"]["param_groups"][0]["lr"] == b["optimizer_state_dict"]["param_groups"][0]["lr"]
 
 
+def test_resume_from_an_earlier_checkpoint_redoes_the_later_rows(tmp_path):
+    run = train(load_config(_base(tmp_path, "max_iterations=3")))  # logged iterations 0, 1, 2
+    train(resume_config(run / "model_1.pt", ["max_iterations=3"]))  # as after a kill past model_1: redo 2
+    rows = [ln.split(",")[:2] for ln in (run / "metrics.csv").read_text().splitlines()[1:]]
+    per_tag = {}
+    for it, tag in rows:
+        per_tag.setdefault(tag, []).append(int(it))
+    assert per_tag["Loss/surrogate"] == [0, 1, 2]  # one value per iteration, the redone one last
+
+
 def test_max_minutes_stops_saves_and_resume_counts_on(tmp_path):
     run = train(load_config(_base(tmp_path, "max_iterations=50", "max_minutes=0.0001")))
     saved = sorted(run.glob("model_*.pt"))

@@ -47,3 +47,21 @@ class RerunLogWriter(LogWriter):
     def stop(self) -> None:
         self.rec.flush()
         self._csv.close()
+
+
+def prune_metrics(csv_path: str | os.PathLike, first_iteration: int) -> int:
+    """Drop ``metrics.csv`` rows of iterations >= ``first_iteration``: what a run logged after the checkpoint it
+    is resumed from (a kill or crash past the last save) is redone, so the curve has one value per iteration.
+    Rewritten through a temporary file; returns how many rows went."""
+    if not os.path.isfile(csv_path):
+        return 0
+    with open(csv_path) as f:
+        lines = f.readlines()
+    keep = [ln for ln in lines[1:] if int(ln.split(",", 1)[0]) < first_iteration]
+    dropped = len(lines) - 1 - len(keep)
+    if dropped:
+        tmp = f"{csv_path}.tmp"
+        with open(tmp, "w") as f:
+            f.writelines(lines[:1] + keep)
+        os.replace(tmp, csv_path)
+    return dropped

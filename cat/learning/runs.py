@@ -21,6 +21,7 @@ from cat.envs.traversal_env import TraversalEnv
 from cat.learning.config import ALGOS, TrainCfg, check_obs_groups, policy_model, runner_cfg, student_model_cfg
 from cat.learning.distill import check_teachers, distill_runner_cfg, load_specialists
 from cat.learning.progress import BudgetReached, install_iteration_hook, quiet_constructor
+from cat.learning.rerun_writer import prune_metrics
 from cat.learning.warm_start import adapt_to_new_inputs
 from cat.terrain import TYPICAL_KINDS
 
@@ -320,6 +321,9 @@ def _train_in(cfg: TrainCfg, env: TraversalEnv, run_dir: Path) -> Path:
     if cfg.resume:
         _restore_training_state(runner, env, cfg.resume, runner.load(cfg.resume))
         runner.current_learning_iteration += 1  # the checkpoint's iteration is complete
+        dropped = prune_metrics(run_dir / "metrics.csv", runner.current_learning_iteration)
+        if dropped:
+            log.info("metrics.csv: dropped %d rows logged after the checkpoint (redone now)", dropped)
         log.info("resumed %s at iteration %d", cfg.resume, runner.current_learning_iteration)
     elif cfg.init:
         runner.load(cfg.init, load_cfg={"actor": True, "critic": True}, strict=True)

@@ -177,9 +177,10 @@ def validate_train_cfg(cfg: TrainCfg) -> None:
         raise ValueError("teachers= is for algo=distill")
     if cfg.sim.backend not in BACKENDS:
         raise ValueError(f"unknown sim backend {cfg.sim.backend!r}; valid: {', '.join(BACKENDS)}")
-    for path in (cfg.init, cfg.resume):
-        if path:
-            read_checkpoint(path)
+    # a resumed run's init= is history (its weights are in the checkpoint): only the file to read is checked
+    path = cfg.resume or cfg.init
+    if path:
+        read_checkpoint(path)
 
 
 def save_config(cfg: TrainCfg, run_dir: Path) -> None:

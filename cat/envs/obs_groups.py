@@ -169,6 +169,11 @@ def group_layout(task: EnvCfg, group: str = "actor") -> tuple:
     return layout
 
 
+def groups_layout(task: EnvCfg, groups: list[str]) -> tuple:
+    """``group_layout`` of each of ``groups`` in order: what a network reading them concatenated depends on."""
+    return tuple(group_layout(task, g) for g in groups)
+
+
 def upgrade_legacy_observations(raw_task: dict) -> dict:
     """A run config's ``task`` mapping with the pre-groups observation layout translated to named groups.
 

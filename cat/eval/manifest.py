@@ -23,7 +23,7 @@ from pathlib import Path
 
 import yaml
 
-from cat.envs.obs_groups import group_layout
+from cat.envs.obs_groups import groups_layout
 from cat.learning.config import TrainCfg, policy_model
 from cat.learning.runs import CheckpointError, load_run_config
 
@@ -56,7 +56,7 @@ class Manifest:
 def obs_layout(cfg: TrainCfg) -> tuple:
     """What fixes the policy's input: per group it reads (PPO's actor or the distilled student), the terms in
     order, whether the field block is live, and the grid sizes of its map terms (``group_layout``)."""
-    return tuple(group_layout(cfg.task, g) for g in policy_model(cfg.algo).obs_groups)
+    return groups_layout(cfg.task, policy_model(cfg.algo).obs_groups)
 
 
 def load_manifest(path: str | os.PathLike) -> Manifest:

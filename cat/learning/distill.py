@@ -20,7 +20,7 @@ import torch.nn as nn
 from rsl_rl.algorithms import Distillation
 from tensordict import TensorDict
 
-from cat.envs.obs_groups import group_layout
+from cat.envs.obs_groups import groups_layout
 from cat.learning.config import TrainCfg, policy_model
 
 log = logging.getLogger(__name__)
@@ -44,11 +44,6 @@ def teacher_group(cfg: TrainCfg, checkpoint: str) -> str:
     if task.scene_dir:
         raise TeacherError(f"teacher {checkpoint} trained on all kinds of {task.scene_dir}: set its task.scene_kind")
     return "flat"
-
-
-def layout_of(cfg: TrainCfg, groups: list[str]) -> tuple:
-    """Concatenated layout of ``groups`` of a run's task (terms, field switch, map sizes per group)."""
-    return tuple(group_layout(cfg.task, g) for g in groups)
 
 
 @dataclass
@@ -89,10 +84,10 @@ def check_teachers(specialists: list[Specialist], cfg: TrainCfg, group_names: li
             raise TeacherError(
                 f"scene group {g!r} has no teacher; teachers cover: {', '.join(sorted(own)) or 'nothing'}"
             )
-    want = layout_of(cfg, list(cfg.algo.distill.teacher_groups))
+    want = groups_layout(cfg.task, list(cfg.algo.distill.teacher_groups))
     for s in specialists:
-        have = layout_of(s.run, list(s.run.algo.obs_groups["actor"]))
-        if [t for lay in have for t in lay[0]] != [t for lay in want for t in lay[0]] or have != want:
+        have = groups_layout(s.run.task, list(s.run.algo.obs_groups["actor"]))
+        if have != want:
             raise TeacherError(
                 f"teacher {s.checkpoint} observed {have} but the env's teacher groups "
                 f"{cfg.algo.distill.teacher_groups} give {want}"

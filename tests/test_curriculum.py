@@ -58,3 +58,11 @@ def test_env_moves_envs_between_scenes_by_level():
     env.reset_idx(torch.arange(4))
     assert (scenes.scene_of_env == 1).all()
     assert env.training_state()["curriculum"]["level"].tolist() == [4, 4, 4, 4]
+
+
+def test_warmup_difficulties_take_the_lowest_levels():
+    """With warm-up scenes (d in [-1, 0)) the levels are bins of [-1, 1]: warm-ups first, the paper's range after."""
+    d = torch.tensor([-1.0, -0.55, -0.1, 0.0, 0.5, 1.0])
+    cur = DifficultyCurriculum(d, num_envs=2, cfg=CurriculumCfg(num_levels=4))
+    assert cur.scene_level.tolist() == [0, 0, 1, 2, 3, 3]
+    assert cur.max_level == 3 and cur.level.tolist() == [0, 0]

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cat.terrain import TYPICAL_KINDS, SceneError, check_scene, make_typical, typical_variants
+from cat.terrain import TYPICAL_KINDS, SceneError, check_scene, make_typical, typical_variants, warmup_variants
 from cat.terrain.voxel import free_volume_fraction
 
 
@@ -66,3 +66,29 @@ def test_bad_inputs():
         make_typical("jump-rope", 0.5, 0)
     with pytest.raises(SceneError, match="difficulty"):
         make_typical("side-pass", 1.5, 0)
+
+
+@pytest.mark.parametrize("kind", TYPICAL_KINDS)
+def test_warmup_variants_are_easier_and_leave_the_paper_scenes_alone(kind):
+    """Warm-up scenes (d < 0) are valid, ordered below the paper's easiest in free volume, and the paper's
+    variants do not depend on them (their seeds and parameters are untouched)."""
+    warm = warmup_variants(kind, 5, seed=0)
+    assert [s.difficulty for s in warm] == pytest.approx([-1.0, -0.8, -0.6, -0.4, -0.2])
+    for s in warm:
+        assert s.kind == kind and s.mesh.is_watertight and len(s.mesh.faces) > 0
+        check_scene(s)
+    free = [free_volume_fraction(make_typical(kind, d, seed=3).occupancy()) for d in (-1.0, -0.5, 0.0, 1.0)]
+    assert np.all(np.diff(free) <= 1e-9), free
+    again = typical_variants(kind, 3, seed=0)  # unchanged by building warm-up scenes first
+    np.testing.assert_array_equal(again[0].mesh.vertices, make_typical(kind, 0.0, seed=0).mesh.vertices)
+
+
+def test_warmup_extremes():
+    """At d = -1 a hurdle-crouch scene has no bar and a ceiling above a walking G1; d outside [-1, 1] is refused."""
+    easiest = make_typical("hurdle-crouch", -1.0, seed=0)
+    parts = easiest.mesh.split(only_watertight=False)
+    assert len(parts) == 1 and parts[0].bounds[0, 2] >= 1.4  # only the ceiling, from ~1.42 m up
+    assert make_typical("hurdle-crouch", 0.0, seed=0).mesh.bounds[0, 2] == 0.0  # the paper's easiest has its bar
+    assert make_typical("multi-hurdle", -1.0, seed=0).mesh.bounds[1, 2] == pytest.approx(0.02)  # never empty
+    with pytest.raises(SceneError, match="difficulty"):
+        make_typical("hurdle-crouch", -1.5)

@@ -3,11 +3,15 @@ behaviour (not from what its normaliser makes of an unseen SDF)."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import torch
 from tensordict import TensorDict
 
 from cat.learning.config import AlgoCfg, policy_model
-from cat.learning.warm_start import adapt_model, unseen_columns
+from cat.learning.hydra_cfg import load_config
+from cat.learning.runs import make_env, make_runner
+from cat.learning.warm_start import _constant_in_prior, adapt_model, adapt_to_new_inputs, unseen_columns
 
 
 def _prior(obs: TensorDict):
@@ -40,3 +44,46 @@ def test_unseen_columns_are_detached_and_the_prior_behaviour_kept():
     torch.testing.assert_close(model(at_mean), before_on_prior_data, atol=1e-6, rtol=0)
     assert abs(float(model.obs_normalizer._mean[0, 4]) - float(new["actor"][:, 4].mean())) < 1e-6
     assert adapt_model(model, new["actor"]) == 0  # now in range: nothing more to do
+
+
+PRIOR = Path(__file__).resolve().parents[1] / "checkpoints" / "flat" / "model_770.pt"
+
+
+def _prior_in_scene(tmp_path, probe_steps: int):
+    """The shipped walking prior loaded into a hurdle-crouch specialist whose only drawn scene is the trivial
+    warm-up (no bar, ceiling above the robot), adapted with ``probe_steps`` of probe."""
+    cfg = load_config(
+        ["task=hurdle_crouch", "task.scene_variants=1", "task.warmup_variants=1", "num_envs=16", f"run_root={tmp_path}"]
+    )
+    env = make_env(cfg)
+    runner = make_runner(cfg, env, str(tmp_path))
+    runner.load(str(PRIOR), load_cfg={"actor": True, "critic": True}, strict=True)
+    actor = runner.alg.actor
+    before = actor.mlp[0].weight.detach().clone()
+    constant = _constant_in_prior(env, actor)  # judged on the prior's own normaliser
+    adapt_to_new_inputs(runner.alg, env, steps=probe_steps)
+    zeroed = (before != 0).any(0) & (actor.mlp[0].weight == 0).all(0)
+    return env, runner.alg, zeroed, constant
+
+
+def _falls(env, alg, steps: int) -> int:
+    obs, falls = env.get_observations(), 0
+    with torch.no_grad():
+        for _ in range(steps):
+            obs, _, dones, extras = env.step(alg.actor(obs))
+            falls += int((dones.bool() & ~extras["time_outs"].bool()).sum())
+    return falls
+
+
+def test_probe_detaches_only_columns_the_prior_saw_constant_and_the_prior_walks(tmp_path):
+    """The probe rollout finds field columns that only go off near obstacles (not at the reset poses), and never
+    a column the prior saw vary; with it the prior walks the trivial warm-up scene as on flat ground."""
+    env, alg, zeroed, constant = _prior_in_scene(tmp_path / "probe", probe_steps=100)
+    terms = env.observation_groups.term_columns(env, "actor")
+    assert zeroed.any()
+    touched = {terms[i] for i in zeroed.nonzero().flatten().tolist()}
+    assert "field_block" in touched and not touched & {"gyro", "projected_gravity", "joint_vel", "last_action"}
+    assert not (zeroed & ~constant).any()  # (the held arm joints were constant to it too)
+    _, _, zeroed_at_reset, _ = _prior_in_scene(tmp_path / "reset", probe_steps=0)
+    assert int(zeroed.sum()) > int(zeroed_at_reset.sum())  # the probe saw columns the reset poses did not
+    assert _falls(env, alg, 150) <= 2  # 16 robots, 3 s

@@ -227,6 +227,10 @@ class EnvCfg:
     ghost_obstacles: bool = False
     scene_variants: int = 10  # typical variants built when scene_dir is None (difficulty spread over [0, 1])
     scene_seed: int = 0  # seed of the typical variants (seeds scene_seed..+variants-1); not the RL seed
+    # training aid: this many extra typical scenes per kind, easier than the paper's easiest (difficulty in
+    # [-1, 0): lower bars, higher ceilings, wider gaps; cat.terrain.typical.warmup_variants), so the difficulty
+    # curriculum starts where the walking prior succeeds. Never evaluated (cat.eval builds the paper's variants).
+    warmup_variants: int = 0
     action_clip: float = 1.0
     gait_freq: tuple[float, float] = (1.3, 1.5)  # gait clock frequency [Hz]
     command: CommandCfg = field(default_factory=CommandCfg)

@@ -1,10 +1,11 @@
 """Difficulty curriculum over a scene set (paper §III-B): each env climbs through difficulty levels.
 
-Scenes carry a difficulty in [0, 1] (typical variants and procedural scenes both do); ``num_levels`` equal
-bins of it are the levels. Each env has a level; at reset it draws one of the scenes of its level (or of the
-nearest lower level that has scenes). After an episode the level goes up on success and down on failure, so
-every env settles where it succeeds about half the time and moves on as the policy improves.
-"""
+Scenes carry a difficulty in [0, 1] (typical variants and procedural scenes both do); ``num_levels`` equal bins of
+it are the levels. Training-only warm-up scenes (``EnvCfg.warmup_variants``) have difficulties in [−1, 0); with
+them the bins span [−1, 1], so the lowest levels hold the warm-up scenes. Each env has a level; at reset it draws
+one of the scenes of its level (or of the nearest lower level that has scenes). After an episode the level goes up
+on success and down on failure, so every env settles where it succeeds about half the time and moves on as the
+policy improves."""
 
 from __future__ import annotations
 
@@ -16,7 +17,7 @@ import torch
 @dataclass
 class CurriculumCfg:
     enabled: bool = True  # False: env i always trains in scene i % num_scenes
-    num_levels: int = 5  # equal-width bins of scene difficulty in [0, 1]
+    num_levels: int = 5  # equal-width bins of scene difficulty in [0, 1] ([-1, 1] with warm-up scenes)
     start_level: int = 0  # level of every env at the start of training
 
 
@@ -26,8 +27,9 @@ class DifficultyCurriculum:
     def __init__(self, difficulties: torch.Tensor, num_envs: int, cfg: CurriculumCfg):
         if cfg.num_levels < 1:
             raise ValueError(f"curriculum.num_levels must be >= 1, got {cfg.num_levels}")
-        d = difficulties.detach().cpu().float().clamp(0.0, 1.0)
-        self.scene_level = torch.clamp((d * cfg.num_levels).long(), max=cfg.num_levels - 1)
+        d = difficulties.detach().cpu().float().clamp(-1.0, 1.0)
+        lo = -1.0 if bool((d < 0).any()) else 0.0
+        self.scene_level = torch.clamp(((d - lo) / (1.0 - lo) * cfg.num_levels).long(), 0, cfg.num_levels - 1)
         self.num_levels = cfg.num_levels
         present = torch.zeros(cfg.num_levels, dtype=torch.bool)
         present[self.scene_level] = True

@@ -97,6 +97,11 @@ class ObservationGroups:
         if self._fresh is not None:
             self._fresh[env_ids] = True
 
+    def term_columns(self, env: TraversalEnv, group: str) -> list[str]:
+        """The term name of every column of ``group`` (history steps repeat the terms, oldest first)."""
+        one = [name for name in self.groups[group] for _ in range(self.fns[name](env).shape[-1])]
+        return one * self.history[group]
+
     def uses(self, *terms: str) -> bool:
         """Whether any group lists one of ``terms``."""
         return any(t in self.fns for t in terms)

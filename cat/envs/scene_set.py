@@ -30,7 +30,7 @@ from tqdm import tqdm
 from cat.envs.field_source import FieldSample
 from cat.fields import Field, FieldBank, FieldCfg, Grid, SceneFields, SceneLayout, StaleFieldError, build_fields
 from cat.fields.store import STORE_FILE
-from cat.terrain import Scene, typical_variants
+from cat.terrain import Scene, typical_variants, warmup_variants
 from cat.terrain.mujoco_export import add_obstacles_to_spec
 
 log = logging.getLogger(__name__)
@@ -166,11 +166,12 @@ class SceneSet:
         device: str = "cpu",
         field_cfg: FieldCfg | None = None,
         per_world: bool = False,
+        warmup: int = 0,
     ) -> SceneSet:
         """The paper's typical scenes of ``kind`` (or of each of several kinds: one scene group per kind)
-        built on the fly (no dataset needed)."""
+        built on the fly (no dataset needed), plus ``warmup`` training-only easier scenes per kind."""
         kinds = [kind] if isinstance(kind, str) else list(kind)
-        scenes = [s for k in kinds for s in typical_variants(k, variants, seed)]
+        scenes = [s for k in kinds for s in warmup_variants(k, warmup, seed) + typical_variants(k, variants, seed)]
         return cls(scenes, lambda i: scene_fields(scenes[i], None, field_cfg), num_envs, device, per_world=per_world)
 
     # --- env hooks ----------------------------------------------------------------------------------------

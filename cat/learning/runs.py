@@ -83,10 +83,11 @@ def make_env(cfg: TrainCfg, num_envs: int | None = None) -> TraversalEnv:
     if task.scene_dir or task.scene_kind or task.scene_groups:
         from cat.envs.scene_set import SceneSet
 
-        kw = dict(device=cfg.sim.device, per_world=cfg.sim.per_world_scenes)
+        kw = dict(device=cfg.sim.device, per_world=cfg.sim.per_world_scenes, warmup=task.warmup_variants)
         if task.scene_groups and not task.scene_dir:
             scenes = SceneSet.typical(task.scene_groups, n, task.scene_variants, task.scene_seed, **kw)
         elif task.scene_dir:
+            kw.pop("warmup")  # typical scenes only (validate_train_cfg refuses it with a scene_dir)
             scenes = SceneSet.from_dir(task.scene_dir, num_envs=n, kind=task.scene_kind, **kw)
         else:
             scenes = SceneSet.typical(task.scene_kind, n, task.scene_variants, task.scene_seed, **kw)
@@ -146,6 +147,10 @@ def validate_train_cfg(cfg: TrainCfg) -> None:
             raise ValueError("task.scene_groups builds typical scenes: it cannot be used with task.scene_dir")
         if kind not in TYPICAL_KINDS:
             raise ValueError(f"task.scene_groups has {kind!r}; typical kinds: {', '.join(TYPICAL_KINDS)}")
+    if cfg.task.warmup_variants < 0:
+        raise ValueError(f"task.warmup_variants={cfg.task.warmup_variants}: must be >= 0")
+    if cfg.task.warmup_variants and cfg.task.scene_dir:
+        raise ValueError("task.warmup_variants builds typical scenes: it cannot be used with task.scene_dir")
     if cfg.task.episode_length_s <= 0:
         raise ValueError(f"task.episode_length_s={cfg.task.episode_length_s}: must be > 0")
     env_groups = resolve_groups(cfg.task.observations)
@@ -329,7 +334,7 @@ def _train_in(cfg: TrainCfg, env: TraversalEnv, run_dir: Path) -> Path:
     elif cfg.init:
         runner.load(cfg.init, load_cfg={"actor": True, "critic": True}, strict=True)
         runner.current_learning_iteration = 0
-        adapt_to_new_inputs(runner.alg, env.get_observations())  # inputs the prior never saw vary (warm_start.py)
+        adapt_to_new_inputs(runner.alg, env)  # inputs the prior never saw vary (warm_start.py)
         log.info("initialised weights from %s", cfg.init)
     remaining = cfg.max_iterations - runner.current_learning_iteration
     if remaining <= 0:

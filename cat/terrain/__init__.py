@@ -9,7 +9,7 @@ from cat.terrain.furniture import House, make_house
 from cat.terrain.indoor import IndoorCfg, make_indoor
 from cat.terrain.procedural import ProceduralCfg, make_procedural
 from cat.terrain.scene import GOAL_HEIGHT, Scene, SceneError, check_scene, load_mesh
-from cat.terrain.typical import TYPICAL_KINDS, make_typical, typical_variants
+from cat.terrain.typical import TYPICAL_KINDS, make_typical, typical_variants, warmup_variants
 from cat.terrain.voxel import VOXEL, GridSpec, ReachCfg
 
 __all__ = [
@@ -32,4 +32,5 @@ __all__ = [
     "make_procedural",
     "make_typical",
     "typical_variants",
+    "warmup_variants",
 ]

@@ -13,7 +13,12 @@ needed for a G1 to physically pass):
 
 Arrows read easy → hard (d = 0 → 1). Positions, gaps and small per-variant jitter come from the seed;
 sizes grow monotonically with d for a fixed seed, so the free-volume fraction falls with d.
-"""
+
+Negative difficulties (d ∈ [−1, 0)) interpolate from trivially easy values at d = −1 to the paper's easiest at d =
+0: bars from below the floor (left out under ``MIN_BAR_TOP``), ceilings from ``CLEAR_CEILING`` (above a walking
+G1), slit gaps from 1.3 m, corridors from 1.8 m. They are training-only warm-up scenes (``warmup_variants``) that
+let a difficulty curriculum start where a walking policy already succeeds; the paper's variants and every
+evaluation use d ∈ [0, 1]."""
 
 from __future__ import annotations
 
@@ -43,6 +48,8 @@ COURSE = (0.4, 1.75)  # x range holding obstacles
 WALL_T = 0.12
 HEIGHT = float(BOUNDS[1, 2])
 HALF_W = float(BOUNDS[1, 1])
+CLEAR_CEILING = 1.42  # warm-up ceiling at d = -1: above a walking G1 (head sphere top 1.33 m at home pose) [m]
+MIN_BAR_TOP = 0.02  # a warm-up bar lower than this is left out (multi-hurdle keeps it, at this height) [m]
 
 
 def lerp(a: float, b: float, t: float) -> float:
@@ -55,21 +62,31 @@ class _Params:
     def __init__(self, d: float, rng: np.random.Generator):
         self.d, self.rng = d, rng
 
-    def __call__(self, easy: float, hard: float, jitter: float = 0.1) -> float:
-        return lerp(easy, hard, self.d + self.rng.uniform(-jitter, jitter))
+    def __call__(self, easy: float, hard: float, jitter: float = 0.1, trivial: float | None = None) -> float:
+        """``easy`` at d = 0, ``hard`` at d = 1; warm-up scenes (d < 0) go from ``trivial`` at d = −1 to ``easy``
+        (sizes without a ``trivial`` value stay at ``easy``)."""
+        t = self.d + self.rng.uniform(-jitter, jitter)
+        if self.d >= 0 or trivial is None:
+            return lerp(easy, hard, t)
+        return lerp(trivial, easy, t + 1.0)
 
 
 # Each element is (x-extent, builder(x0) -> parts); builders close over their parameters.
 Element = tuple[float, Callable[[float], list[trimesh.Trimesh]]]
 
 
-def _bar(p: _Params) -> Element:
-    top, r = p(0.08, 0.25), p(0.08, 0.15)
+def _bar(p: _Params, vanish: bool = True) -> Element:
+    """``vanish``: a warm-up bar lower than ``MIN_BAR_TOP`` is left out (else it stays at that height)."""
+    top, r = p(0.08, 0.25, trivial=-0.1), p(0.08, 0.15)
+    if top < MIN_BAR_TOP:
+        if vanish:
+            return 2 * r, lambda x0: []
+        top = MIN_BAR_TOP
     return 2 * r, lambda x0: [bar("y", (x0 + r, 0.0, top - r), r, 2 * HALF_W)]
 
 
 def _ceiling(p: _Params, depth: tuple[float, float] = (0.3, 0.6)) -> Element:
-    bottom, dep = p(1.15, 1.00), p(*depth)
+    bottom, dep = p(1.15, 1.00, trivial=CLEAR_CEILING), p(*depth)
     return dep, lambda x0: [box((x0, -HALF_W, bottom), (x0 + dep, HALF_W, HEIGHT))]
 
 
@@ -79,7 +96,7 @@ def _slit_parts(x0: float, gap: float, yc: float) -> list[trimesh.Trimesh]:
 
 
 def _slit(p: _Params, yc: float | None = None) -> Element:
-    gap = p(0.90, 0.32, jitter=0.05)
+    gap = p(0.90, 0.32, jitter=0.05, trivial=1.3)
     if yc is None:
         yc = p.rng.uniform(-1, 1) * (HALF_W - 0.15 - gap / 2) * 0.6
     return WALL_T, lambda x0: _slit_parts(x0, gap, yc)
@@ -87,8 +104,8 @@ def _slit(p: _Params, yc: float | None = None) -> Element:
 
 def _low_door(p: _Params) -> Element:
     """Slit wall whose gap is capped by a lintel, continued by a ceiling: side-step and crouch at once."""
-    gap, yc = p(0.90, 0.36, jitter=0.05), p.rng.uniform(-0.25, 0.25)
-    bottom, dep = p(1.15, 1.00), p(0.2, 0.5)
+    gap, yc = p(0.90, 0.36, jitter=0.05, trivial=1.3), p.rng.uniform(-0.25, 0.25)
+    bottom, dep = p(1.15, 1.00, trivial=CLEAR_CEILING), p(0.2, 0.5)
 
     def build(x0: float) -> list[trimesh.Trimesh]:
         return _slit_parts(x0, gap, yc) + [box((x0, -HALF_W, bottom), (x0 + WALL_T + dep, HALF_W, HEIGHT))]
@@ -116,7 +133,7 @@ def _sequence(elements: list[Element], rng: np.random.Generator, min_gap: float 
 
 
 def _corridor(p: _Params) -> list[trimesh.Trimesh]:
-    half = p(1.3, 0.75, jitter=0.05) / 2
+    half = p(1.3, 0.75, jitter=0.05, trivial=1.8) / 2
     x0, x1 = COURSE[0] - 0.05, COURSE[1] - 0.05
     return [box((x0, -HALF_W, 0.0), (x1, -half, HEIGHT)), box((x0, half, 0.0), (x1, HALF_W, HEIGHT))]
 
@@ -140,14 +157,17 @@ def _layout(kind: str, p: _Params) -> list[trimesh.Trimesh]:
         return _sequence([_slit(p, yc=off), _slit(p, yc=-off)], rng, min_gap=0.45)
     if kind == "multi-hurdle":
         n = 2 if p.d < 0.5 else 3
-        return _sequence([_bar(p) for _ in range(n)], rng, min_gap=0.3)
+        return _sequence([_bar(p, vanish=False) for _ in range(n)], rng, min_gap=0.3)  # never an empty scene
     raise SceneError(f"unknown typical scene type {kind!r}; valid: {', '.join(TYPICAL_KINDS)}")
 
 
 def make_typical(kind: str, difficulty: float = 0.5, seed: int = 0) -> Scene:
-    """One typical scene of ``kind`` (see ``TYPICAL_KINDS``); deterministic in (kind, difficulty, seed)."""
-    if not 0.0 <= difficulty <= 1.0:
-        raise SceneError(f"difficulty must be in [0, 1], got {difficulty}")
+    """One typical scene of ``kind`` (see ``TYPICAL_KINDS``); deterministic in (kind, difficulty, seed).
+
+    ``difficulty`` ∈ [0, 1] spans the paper's range; [−1, 0) is the training-only warm-up range.
+    """
+    if not -1.0 <= difficulty <= 1.0:
+        raise SceneError(f"difficulty must be in [-1, 1] ([0, 1] for the paper's scenes), got {difficulty}")
     rng = np.random.default_rng([seed, TYPICAL_KINDS.index(kind) if kind in TYPICAL_KINDS else 99])
     parts = crop_parts(_layout(kind, _Params(difficulty, rng)), BOUNDS[0], BOUNDS[1])
     return Scene(
@@ -167,3 +187,13 @@ def typical_variants(kind: str, n: int = 10, seed: int = 0) -> list[Scene]:
     """``n`` variants of ``kind`` with difficulties spread evenly over [0, 1] and seeds seed..seed+n-1."""
     ds = np.linspace(0.0, 1.0, n) if n > 1 else np.array([0.5])
     return [make_typical(kind, float(d), seed + i) for i, d in enumerate(ds)]
+
+
+WARMUP_SEED_OFFSET = 10_000  # warm-up scenes never share a seed with the paper's variants
+
+
+def warmup_variants(kind: str, n: int, seed: int = 0) -> list[Scene]:
+    """``n`` training-only scenes of ``kind`` easier than the paper's easiest: difficulties −1, −1 + 1/n, …,
+    −1/n (seeds ``WARMUP_SEED_OFFSET`` + seed + i), so a curriculum climbs from walking to the paper's range."""
+    ds = -1.0 + np.arange(n) / max(n, 1)
+    return [make_typical(kind, float(d), WARMUP_SEED_OFFSET + seed + i) for i, d in enumerate(ds)]

@@ -5,7 +5,8 @@ it are the levels. Training-only warm-up scenes (``EnvCfg.warmup_variants``) hav
 them the bins span [−1, 1], so the lowest levels hold the warm-up scenes. Each env has a level; at reset it draws
 one of the scenes of its level (or of the nearest lower level that has scenes). After an episode the level goes up
 on success and down on failure, so every env settles where it succeeds about half the time and moves on as the
-policy improves."""
+policy improves.
+"""
 
 from __future__ import annotations
 

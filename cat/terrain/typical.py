@@ -18,7 +18,8 @@ Negative difficulties (d ∈ [−1, 0)) interpolate from trivially easy values a
 0: bars from below the floor (left out under ``MIN_BAR_TOP``), ceilings from ``CLEAR_CEILING`` (above a walking
 G1), slit gaps from 1.3 m, corridors from 1.8 m. They are training-only warm-up scenes (``warmup_variants``) that
 let a difficulty curriculum start where a walking policy already succeeds; the paper's variants and every
-evaluation use d ∈ [0, 1]."""
+evaluation use d ∈ [0, 1].
+"""
 
 from __future__ import annotations
 

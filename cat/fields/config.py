@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import asdict, dataclass, fields
 
@@ -51,6 +52,19 @@ def cfg_from_dict(values: dict) -> FieldCfg:
     """FieldCfg from saved values, ignoring keys this version does not know (missing ones take defaults)."""
     known = {f.name for f in fields(FieldCfg)}
     return FieldCfg(**{k: v for k, v in values.items() if k in known})
+
+
+def read_saved_header(z, path, version_key: str, version: int, cfg: FieldCfg | None) -> tuple[dict, tuple]:
+    """The build constants and ``(origin, voxel, shape)`` of a saved ``.npz`` field file ``z``, after checking its
+    format version (``z[version_key]`` must equal ``version``) and, with ``cfg``, its build constants
+    (:func:`check_built_with`); raises :class:`StaleFieldError` naming ``path``."""
+    found = int(z[version_key]) if version_key in z else -1
+    if found != version:
+        raise StaleFieldError(f"{path}: format version {found}, expected {version}")
+    saved = json.loads(str(z["cfg"]))
+    if cfg is not None:
+        check_built_with(saved, cfg, str(path))
+    return saved, (tuple(z["origin"]), float(z["voxel"]), tuple(int(v) for v in z["shape"]))
 
 
 def check_built_with(saved: dict, cfg: FieldCfg, source: str) -> None:

@@ -18,7 +18,7 @@ import warp as wp
 from cat.fields import geodesic as geo_mod
 from cat.fields import sdf as sdf_mod
 from cat.fields._wp import get_device, run_concurrently, to_wp
-from cat.fields.config import FieldCfg, StaleFieldError, cfg_from_dict, check_built_with
+from cat.fields.config import FieldCfg, cfg_from_dict, read_saved_header
 from cat.fields.grid import Grid
 
 log = logging.getLogger(__name__)
@@ -186,13 +186,8 @@ class Field:
         """Read a field written by :meth:`save`. With ``cfg``, a field built under other build constants
         (:data:`cat.fields.config.BUILD_KEYS`) raises :class:`cat.fields.config.StaleFieldError`."""
         with np.load(path, allow_pickle=False) as z:
-            version = int(z["format_version"]) if "format_version" in z else -1
-            if version != FORMAT_VERSION:
-                raise StaleFieldError(f"{path}: field format version {version}, expected {FORMAT_VERSION}")
-            saved = json.loads(str(z["cfg"]))
-            if cfg is not None:
-                check_built_with(saved, cfg, str(path))
-            grid = Grid(tuple(z["origin"]), float(z["voxel"]), tuple(int(v) for v in z["shape"]))
+            saved, grid = read_saved_header(z, path, "format_version", FORMAT_VERSION, cfg)
+            grid = Grid(*grid)
             data = (z["goal"].copy(), z["data"].copy(), z["geodesic"].copy(), z["potential"].copy())
             return cls(grid, *data, cfg_from_dict(saved))
 

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cat.fields.config import FieldCfg, StaleFieldError, cfg_from_dict, check_built_with
+from cat.fields.config import FieldCfg, StaleFieldError, cfg_from_dict, read_saved_header
 from cat.fields.field import Field
 from cat.fields.grid import Grid
 
@@ -106,13 +106,8 @@ class SceneFields:
 
 
 def _check(z, path, cfg: FieldCfg | None, grid: Grid | None, goals) -> tuple[Grid, np.ndarray, FieldCfg]:
-    version = int(z["store_version"]) if "store_version" in z else -1
-    if version != STORE_VERSION:
-        raise StaleFieldError(f"{path}: scene-fields format version {version}, expected {STORE_VERSION}")
-    saved = json.loads(str(z["cfg"]))
-    if cfg is not None:
-        check_built_with(saved, cfg, str(path))
-    saved_grid = Grid(tuple(z["origin"]), float(z["voxel"]), tuple(int(v) for v in z["shape"]))
+    saved, header_grid = read_saved_header(z, path, "store_version", STORE_VERSION, cfg)
+    saved_grid = Grid(*header_grid)
     if grid is not None and not _same_grid(saved_grid, grid):
         raise StaleFieldError(f"{path}: built on grid {saved_grid}, expected {grid}")
     saved_goals = z["goals"]

@@ -52,6 +52,17 @@ class WindowCfg:
     shape: tuple[int, int, int] = (128, 128, 35)
 
 
+@wp.func
+def _dda_axis(p: float, d: float, cell: int) -> wp.vec3:
+    """Amanatides-Woo set-up along one axis: (step -1/0/+1, t of the first cell boundary, t per cell)."""
+    big = float(1.0e30)
+    if d > 0.0:
+        return wp.vec3(1.0, (float(cell + 1) - p) / d, 1.0 / d)
+    if d < 0.0:
+        return wp.vec3(-1.0, (float(cell) - p) / d, -1.0 / d)
+    return wp.vec3(0.0, big, big)
+
+
 @wp.kernel
 def _trace_kernel(
     origin: wp.vec3,
@@ -77,40 +88,18 @@ def _trace_kernel(
     ie = int(wp.floor(p1[0]))
     je = int(wp.floor(p1[1]))
     ke = int(wp.floor(p1[2]))
-    si = int(0)
-    sj = int(0)
-    sk = int(0)
-    big = float(1.0e30)
-    tx = big
-    ty = big
-    tz = big
-    dx = big
-    dy = big
-    dz = big
-    if d[0] > 0.0:
-        si = 1
-        tx = (float(i + 1) - p0[0]) / d[0]
-        dx = 1.0 / d[0]
-    elif d[0] < 0.0:
-        si = -1
-        tx = (float(i) - p0[0]) / d[0]
-        dx = -1.0 / d[0]
-    if d[1] > 0.0:
-        sj = 1
-        ty = (float(j + 1) - p0[1]) / d[1]
-        dy = 1.0 / d[1]
-    elif d[1] < 0.0:
-        sj = -1
-        ty = (float(j) - p0[1]) / d[1]
-        dy = -1.0 / d[1]
-    if d[2] > 0.0:
-        sk = 1
-        tz = (float(k + 1) - p0[2]) / d[2]
-        dz = 1.0 / d[2]
-    elif d[2] < 0.0:
-        sk = -1
-        tz = (float(k) - p0[2]) / d[2]
-        dz = -1.0 / d[2]
+    ax = _dda_axis(p0[0], d[0], i)
+    ay = _dda_axis(p0[1], d[1], j)
+    az = _dda_axis(p0[2], d[2], k)
+    si = int(ax[0])
+    sj = int(ay[0])
+    sk = int(az[0])
+    tx = ax[1]
+    ty = ay[1]
+    tz = az[1]
+    dx = ax[2]
+    dy = ay[2]
+    dz = az[2]
     steps = wp.abs(ie - i) + wp.abs(je - j) + wp.abs(ke - k)
     for _s in range(steps):
         if i >= 0 and i < nx and j >= 0 and j < ny and k >= 0 and k < nz:

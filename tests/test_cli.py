@@ -51,7 +51,12 @@ def test_help_and_cfg_job_build_nothing(tmp_path):
 
 def test_multirun_and_hydra_dirs(tmp_path):
     small = [a for a in SMALL if not a.startswith("task=")]
-    sweep = ["task=flat,side_pass", "seed=0,1", "task.scene_variants=1"]  # two tasks x two seeds
+    sweep = [
+        "task=flat,side_pass",
+        "seed=0,1",
+        "task.scene_variants=1",
+        "task.warmup_variants=0",
+    ]  # two tasks x two seeds
     res = _run("train.py", "-m", *small, *sweep, f"hydra.sweep.dir={tmp_path / 'sweep'}")
     assert res.returncode == 0, res.stderr
     assert sorted(p.name for p in (tmp_path / "sweep").iterdir()) == ["0", "1", "2", "3"]

@@ -10,6 +10,9 @@ from cat.envs.config import EnvCfg
 from cat.envs.curriculum import CurriculumCfg, DifficultyCurriculum
 from cat.envs.scene_set import SceneSet
 from cat.envs.traversal_env import TraversalEnv
+from cat.eval.runner import run_scene_group
+from cat.learning.hydra_cfg import load_config
+from cat.learning.runs import validate_train_cfg
 
 DIFF = torch.tensor([0.0, 0.1, 0.5, 0.9, 1.0])  # 5 levels -> scene levels 0, 0, 2, 4, 4
 
@@ -66,3 +69,15 @@ def test_warmup_difficulties_take_the_lowest_levels():
     cur = DifficultyCurriculum(d, num_envs=2, cfg=CurriculumCfg(num_levels=4))
     assert cur.scene_level.tolist() == [0, 0, 1, 2, 3, 3]
     assert cur.max_level == 3 and cur.level.tolist() == [0, 0]
+
+
+def test_warmup_scenes_train_but_are_never_evaluated(tmp_path):
+    """``task.warmup_variants`` adds easier scenes to the training set only; evaluation rebuilds the paper's
+    variants; a scene dataset refuses the option (it builds typical scenes)."""
+    train_set = SceneSet.typical("hurdle-crouch", num_envs=2, variants=1, warmup=2)
+    assert sorted(train_set.difficulties.tolist()) == pytest.approx([-1.0, -0.5, 0.5])
+    cfg = load_config(["task=hurdle_crouch", "task.warmup_variants=2", "task.scene_variants=3"])
+    evaluated = run_scene_group(cfg.task)
+    assert [s.difficulty for s in evaluated.scenes] == pytest.approx([0.0, 0.5, 1.0])
+    with pytest.raises(ValueError, match="warmup_variants"):
+        validate_train_cfg(load_config(["task=hurdle_crouch", f"task.scene_dir={tmp_path}"]))

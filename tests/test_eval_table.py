@@ -249,7 +249,13 @@ def test_failure_during_evaluation_leaves_no_output(tmp_path, monkeypatch, caplo
 
 def test_scene_seed_is_not_the_rl_seed(tmp_path):
     """Typical scenes come from task.scene_seed; the RL seed does not change them; play/eval rebuild them."""
-    base = ["task=hurdle_crouch", "task.scene_variants=2", "num_envs=2", f"run_root={tmp_path}"]
+    base = [
+        "task=hurdle_crouch",
+        "task.scene_variants=2",
+        "task.warmup_variants=0",
+        "num_envs=2",
+        f"run_root={tmp_path}",
+    ]
     a = make_env(load_config([*base, "seed=5", "task.scene_seed=3"]))
     b = make_env(load_config([*base, "seed=6", "task.scene_seed=3"]))
     want = typical_variants("hurdle-crouch", 2, 3)

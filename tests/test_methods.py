@@ -21,7 +21,7 @@ from cat.learning.runs import load_run_config, make_env, resume_config, train
 
 METHODS = ("ours", "wo_obs_field", "wo_r_field", "astraversal", "humanoid_parkour")
 FIELD_FREE_REWARD = ("wo_r_field", "astraversal", "humanoid_parkour")
-TASK = ["task=hurdle_crouch", "task.scene_variants=1", "num_envs=2"]
+TASK = ["task=hurdle_crouch", "task.scene_variants=1", "task.warmup_variants=0", "num_envs=2"]
 
 
 def test_methods_compose_and_are_recorded():
@@ -88,7 +88,17 @@ def test_straight_command_points_at_the_goal():
 def test_map_clearance_on_an_analytic_scene():
     """A typical scene replaced by its elevation layers: one link at a hurdle's top height penalised, the same link
     0.3 m above it not; under a ceiling the head near its underside is penalised; open floor costs nothing."""
-    env = make_env(load_config(["task=hurdle_crouch", "task.scene_variants=1", "num_envs=1", "method=astraversal"]))
+    env = make_env(
+        load_config(
+            [
+                "task=hurdle_crouch",
+                "task.scene_variants=1",
+                "task.warmup_variants=0",
+                "num_envs=1",
+                "method=astraversal",
+            ]
+        )
+    )
     ground, over = env.perception.layers_at(torch.tensor([[[x, y] for x in np.arange(0, 2, 0.02) for y in [0.0]]]))
     g, o = ground[0].numpy(), over[0].numpy()
     xs = np.arange(0, 2, 0.02)

@@ -224,7 +224,15 @@ def test_run_config_switch():
     from cat.learning.hydra_cfg import load_config
     from cat.learning.runs import make_env as make_run_env
 
-    cfg = load_config(["task=hurdle_crouch", "num_envs=4", "task.scene_variants=2", "sim.per_world_scenes=true"])
+    cfg = load_config(
+        [
+            "task=hurdle_crouch",
+            "num_envs=4",
+            "task.scene_variants=2",
+            "task.warmup_variants=0",
+            "sim.per_world_scenes=true",
+        ]
+    )
     env = make_run_env(cfg)
     assert env.scenes.per_world and np.all(env.scenes.offsets == 0.0)
     wm = env.world_models

@@ -69,5 +69,7 @@ def test_specialist_initialises_from_flat_policy(tmp_path):
     base = ["num_envs=8", "max_iterations=1", f"run_root={tmp_path}", "algo.num_steps_per_env=8"]
     flat = train(load_config(["task=flat", *base]))
     ckpt = sorted(flat.glob("model_*.pt"))[-1]
-    spec = train(load_config(["task=hurdle_crouch", "task.scene_variants=2", f"init={ckpt}", *base]))
+    spec = train(
+        load_config(["task=hurdle_crouch", "task.scene_variants=2", "task.warmup_variants=0", f"init={ckpt}", *base])
+    )
     assert sorted(spec.glob("model_*.pt"))

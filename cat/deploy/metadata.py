@@ -62,6 +62,12 @@ _TERMS = {
         lambda t: t.field_obs.sdf_clip,
         "per query link: F_H (3), grad d (3) in the yaw frame, d clipped to +-clip [m]; refreshed at refresh_hz",
     ),
+    "field_block_odometry": (
+        lambda t, r: 7 * len(r.query_links),
+        lambda t: t.field_obs.sdf_clip,
+        "field_block at the links placed by the odometry pose (trained with a drifting pose error); on a robot, "
+        "its field_block",
+    ),
     "base_lin_vel": (lambda t, r: 3, None, "root velocity in the yaw frame [m/s] (privileged)"),
     "base_height": (lambda t, r: 1, None, "root height [m] (privileged)"),
     "link_positions": (lambda t, r: 3 * len(r.query_links), None, "query links minus root, yaw frame (privileged)"),

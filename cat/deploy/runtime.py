@@ -45,8 +45,9 @@ from cat.terrain.mujoco_export import add_obstacles_to_spec
 
 log = logging.getLogger(__name__)
 
-DEPLOYABLE_TERMS = ACTOR_TERMS
-"""Observation terms a robot can compute (the default actor group is exactly that); others are refused."""
+DEPLOYABLE_TERMS = (*ACTOR_TERMS, "field_block_odometry")
+"""Observation terms a robot can compute (the default actor group and the student's drifting field block, which
+on a robot is its ``field_block``: that comes from the odometry pose already); others are refused."""
 
 
 @dataclass
@@ -181,6 +182,7 @@ class Runtime:
             self.goals = torch.zeros(1, 3, dtype=f32)
             self.goal: np.ndarray | None = None  # goal_version keeps counting: a field of an old goal never matches
             self.field_obs_buf = torch.zeros(1, len(self.robot.query_links), 7, dtype=f32)
+            self.field_obs_odom_buf = None  # field_block_odometry reads field_block: the links are placed by odometry
             self.f_h = torch.zeros(1, len(self.robot.query_links), 3, dtype=f32)
             self.used_field: LiveField | None = None
             self.step_count = 0

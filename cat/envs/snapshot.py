@@ -39,6 +39,9 @@ def get_state(env: TraversalEnv) -> dict:
         snap["field_idx"] = env.field_source.field_idx.clone()
     if env.world_models is not None:  # per-world scenes (which model each world steps: snap["sim"])
         snap["world_model_scales"] = env.world_models.scales.clone()
+    if env.odometry is not None:  # odometry drift (absent otherwise: older snapshots stay valid)
+        snap["odometry_error"] = env.odometry.error.clone()
+        snap["field_obs_odom_buf"] = env.field_obs_odom_buf.clone()
     return snap
 
 
@@ -56,6 +59,8 @@ def set_state(env: TraversalEnv, snap: dict) -> None:
         raise ValueError("env snapshot has other reward terms than this env")
     if "world_model_scales" in snap and env.world_models is None:
         raise ValueError("env snapshot of per-world scenes (sim.per_world_scenes=true) cannot restore tiles")
+    if "odometry_error" in snap and env.odometry is None:
+        raise ValueError("env snapshot has odometry drift (field_block_odometry with noise on); this env has none")
     if env.world_models is not None and snap["world_model_scales"].shape != env.world_models.scales.shape:
         raise ValueError("env snapshot has another per-world model pool (scenes x domain_rand.pool_size)")
     for name in FIELDS:
@@ -63,6 +68,9 @@ def set_state(env: TraversalEnv, snap: dict) -> None:
     for k, v in snap["episode_sums"].items():
         env.episode_sums[k].copy_(v)
     env.trial.load_state_dict(snap["trial"])
+    if env.odometry is not None:
+        env.odometry.error.copy_(snap["odometry_error"])
+        env.field_obs_odom_buf.copy_(snap["field_obs_odom_buf"])
     env.common_step = snap["common_step"]
     if env.world_models is not None:
         env.world_models.set_scales(snap["world_model_scales"])

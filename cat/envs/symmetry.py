@@ -10,6 +10,9 @@ term and the 12 leg actions mirror by a column permutation and a sign, so a grou
 - the 13 query links: left <-> right; the gait clock shifts half a period (sin, cos) -> (-sin, -cos)
 - robot-centric grids (elevation map layers, voxel grid): the lateral axis reverses (cell y -> -y), values keep
   their sign (heights and occupancy are scalars)
+- ``field_block_odometry`` mirrors as ``field_block``. A mirrored world keeps its own odometry drift, so its
+  block is the mirror image only where the drift is zero (noise off); the mirrored observation is that of the
+  mirrored drift (dx, -dy, -dyaw), which the isotropic random walk makes exactly as likely (augmentation-valid)
 """
 
 from __future__ import annotations
@@ -68,6 +71,7 @@ def term_mirror(env: TraversalEnv, term: str) -> tuple[list[int], list[float]]:
     joints = env.robot.joint_names
     legs = [joints[i] for i in env.robot.policy_joint_ids]
     links = [q.name for q in env.robot.query_links]
+    field = _links(links, ([0, 1, 2, 3, 4, 5, 6], [1.0, -1.0, 1.0, 1.0, -1.0, 1.0, 1.0]))
     table = {
         "gyro": AXIAL,
         "projected_gravity": POLAR,
@@ -77,7 +81,8 @@ def term_mirror(env: TraversalEnv, term: str) -> tuple[list[int], list[float]]:
         "leg_targets": joint_mirror(legs),
         "goal_command": POLAR,
         "gait_phase": ([0, 1], [-1.0, -1.0]),
-        "field_block": _links(links, ([0, 1, 2, 3, 4, 5, 6], [1.0, -1.0, 1.0, 1.0, -1.0, 1.0, 1.0])),
+        "field_block": field,
+        "field_block_odometry": field,  # a mirrored drift (dx, -dy, -dyaw) is as likely: the walk is isotropic
         "base_lin_vel": POLAR,
         "base_height": ([0], [1.0]),
         "link_positions": _links(links, POLAR),

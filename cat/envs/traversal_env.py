@@ -28,6 +28,7 @@ from cat.envs.mdp.actions import apply_actions, soft_joint_limits
 from cat.envs.mdp.commands import command_source, velocity_command
 from cat.envs.mdp.field_obs import field_obs
 from cat.envs.obs_groups import ObservationGroups, lookup_term
+from cat.envs.odometry import OdometryDrift
 from cat.envs.perception import ScenePerception
 from cat.envs.robot import RobotCfg, home_qpos, load_robot_cfg
 from cat.envs.scene import (
@@ -150,6 +151,12 @@ class TraversalEnv(VecEnv):
         self.w0[0] = self.field_cfg.w_root  # the root (pelvis) has priority (paper eq. w0); query_links[0]
         self.field_obs_buf = torch.zeros(n, k, 7, **f32)
         self.field_refresh = max(1, round(1.0 / (self.cfg.field_obs.refresh_hz * self.dt)))
+        # field_block_odometry: the block at the links as a drifting odometry places them (off: reads field_block)
+        self.odometry, self.field_obs_odom_buf = None, None
+        noise = self.cfg.noise
+        if noise.enabled and self.cfg.field_obs.enabled and self.observation_groups.uses("field_block_odometry"):
+            self.odometry = OdometryDrift(n, noise.odometry_xy, noise.odometry_yaw, dev)
+            self.field_obs_odom_buf = torch.zeros(n, k, 7, **f32)
         self.reward_names = [
             f.name for f in fields(self.cfg.rewards) if f.type == "float" and getattr(self.cfg.rewards, f.name) != 0.0
         ]
@@ -249,6 +256,18 @@ class TraversalEnv(VecEnv):
             self.field.sdf[ids],
             self.cfg.field_obs,
         )
+        if self.odometry is not None:
+            self.field_obs_odom_buf[ids] = self._odometry_field_obs(env_ids)
+
+    def _odometry_field_obs(self, env_ids: torch.Tensor | None) -> torch.Tensor:
+        """``field_obs`` of the field queried where the odometry places the links (``cat.envs.odometry``)."""
+        ids = slice(None) if env_ids is None else env_ids
+        st, odom = self.state, self.odometry
+        points, yaw = odom.displace(st.root_pos[ids], st.yaw[ids], st.link_pos[ids], env_ids)
+        field = self.field_source.sample(points, self.goals[ids], env_ids)
+        vel = odom.rotate(st.link_vel[ids], env_ids)  # link velocities in the odometry's frame
+        hpf = humanoid_pf(field.force, field.grad_sdf, field.sdf, vel, self.w0, self.field_cfg.lam)
+        return field_obs(yaw, hpf, field.grad_sdf, field.sdf, self.cfg.field_obs)
 
     # --- VecEnv ------------------------------------------------------------------------------------------
     def get_observations(self) -> TensorDict:
@@ -269,6 +288,8 @@ class TraversalEnv(VecEnv):
         self._update_field()
         self.common_step += 1
         if self.common_step % self.field_refresh == 0:
+            if self.odometry is not None:  # drift since the last refresh, or since the reset if more recent
+                self.odometry.advance(self.step_count.clamp(max=self.field_refresh) * self.dt, self.generator)
             self._refresh_field_obs()
 
         # terminations
@@ -445,6 +466,8 @@ class TraversalEnv(VecEnv):
         for v in self.episode_sums.values():
             v[env_ids] = 0.0
         self.observation_groups.reset(env_ids)
+        if self.odometry is not None:
+            self.odometry.reset(env_ids)
         if self.scenes is not None:
             self.field_source.assign(env_ids, self.scenes.field_ids(env_ids))
         if self.field is not None:

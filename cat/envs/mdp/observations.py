@@ -57,6 +57,16 @@ def field_block(env: TraversalEnv) -> torch.Tensor:
     return env.field_obs_buf.reshape(env.num_envs, -1)
 
 
+def field_block_odometry(env: TraversalEnv) -> torch.Tensor:
+    """``field_block`` as the robot's odometry sees it: the field queried at the links displaced by a drifting
+    pose error and turned into the drifted yaw frame (``cat.envs.odometry``; on with ``noise.enabled``). Without
+    drift (noise off, or a robot whose field block already comes from its own odometry pose) it is ``field_block``.
+    """
+    if env.field_obs_odom_buf is None:
+        return field_block(env)
+    return env.field_obs_odom_buf.reshape(env.num_envs, -1)
+
+
 def elevation_map(env: TraversalEnv) -> torch.Tensor:
     """Two-layer elevation map around the robot (ground then overhead layer, each row-major along x, across y).
 

@@ -47,6 +47,9 @@ class EvalCfg:
     noise: bool = True  # keep the observation noise the policy was trained with
     domain_rand: bool = False
     push: bool = False
+    # MuJoCo C: each world holds only its own scene's obstacles (cat/envs/scene_models.py), not every scene in
+    # tiles: the same contacts, much faster with many scenes. Warp always uses tiles.
+    per_world_scenes: bool = True
 
 
 @dataclass
@@ -78,8 +81,8 @@ class SceneGroup:
         names = [str(f.relative_to(root)) for f in folders]
         return cls(name, scenes, names, [scene_fields(s, f, None) for s, f in zip(scenes, folders, strict=True)])
 
-    def scene_set(self, num_envs: int, device: str) -> SceneSet:
-        return SceneSet(self.scenes, self.fields, num_envs, device)
+    def scene_set(self, num_envs: int, device: str, per_world: bool = False) -> SceneSet:
+        return SceneSet(self.scenes, self.fields, num_envs, device, per_world=per_world)
 
 
 def run_scene_group(task: EnvCfg, scene_seed: int | None = None, scene_dir: str = "") -> SceneGroup | None:
@@ -127,7 +130,8 @@ def make_eval_env(
     task: EnvCfg, group: SceneGroup | None, num_envs: int, cfg: EvalCfg, sim: str = "mujoco", device: str = "cpu"
 ) -> TraversalEnv:
     """An env for ``task`` on ``group``'s scenes (``None``: flat ground), auto-reset off."""
-    scenes = group.scene_set(num_envs, device) if group is not None else None
+    per_world = cfg.per_world_scenes and sim == "mujoco"
+    scenes = group.scene_set(num_envs, device, per_world) if group is not None else None
     env = TraversalEnv(eval_task(task, num_envs, cfg), sim=sim, device=device, scenes=scenes, seed=cfg.seed)
     env.auto_reset = False
     return env

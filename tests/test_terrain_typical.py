@@ -83,12 +83,22 @@ def test_warmup_variants_are_easier_and_leave_the_paper_scenes_alone(kind):
     np.testing.assert_array_equal(again[0].mesh.vertices, make_typical(kind, 0.0, seed=0).mesh.vertices)
 
 
+def _parts(kind: str, d: float) -> list:
+    """(bottom, top) heights of a typical scene's parts, lowest first."""
+    parts = make_typical(kind, d, seed=0).mesh.split(only_watertight=False)
+    return sorted((round(float(p.bounds[0, 2]), 3), round(float(p.bounds[1, 2]), 3)) for p in parts)
+
+
 def test_warmup_extremes():
-    """At d = -1 a hurdle-crouch scene has no bar and a ceiling above a walking G1; d outside [-1, 1] is refused."""
-    easiest = make_typical("hurdle-crouch", -1.0, seed=0)
-    parts = easiest.mesh.split(only_watertight=False)
-    assert len(parts) == 1 and parts[0].bounds[0, 2] >= 1.4  # only the ceiling, from ~1.42 m up
-    assert make_typical("hurdle-crouch", 0.0, seed=0).mesh.bounds[0, 2] == 0.0  # the paper's easiest has its bar
-    assert make_typical("multi-hurdle", -1.0, seed=0).mesh.bounds[1, 2] == pytest.approx(0.02)  # never empty
+    """Hurdle-crouch warm-ups teach one skill after the other: at d = -1 a 2 cm bar under a ceiling out of reach
+    (1.42 m), at d = -0.5 the paper's easiest bar (8 cm) with the ceiling still up, then the ceiling comes down to
+    the paper's 1.15 m at d = 0; d outside [-1, 1] is refused."""
+    (bar_lo, bar_hi), (ceil_lo, _) = _parts("hurdle-crouch", -1.0)
+    assert bar_lo == 0.0 and 0.02 <= bar_hi <= 0.035 and ceil_lo >= 1.4  # (jitter: d +- 0.1)
+    for d in (-0.5, 0.0):
+        (_, bar_hi), (ceil_lo, _) = _parts("hurdle-crouch", d)
+        assert 0.07 <= bar_hi <= 0.09  # the paper's easiest bar (jitter clipped at its easy end)
+        assert ceil_lo >= 1.33 if d == -0.5 else 1.14 <= ceil_lo <= 1.17
+    assert all(0.02 <= top <= 0.035 for _, top in _parts("multi-hurdle", -1.0))
     with pytest.raises(SceneError, match="difficulty"):
         make_typical("hurdle-crouch", -1.5)

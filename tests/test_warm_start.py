@@ -50,10 +50,17 @@ PRIOR = Path(__file__).resolve().parents[1] / "checkpoints" / "flat" / "model_77
 
 
 def _prior_in_scene(tmp_path, probe_steps: int):
-    """The shipped walking prior loaded into a hurdle-crouch specialist whose only drawn scene is the trivial
-    warm-up (no bar, ceiling above the robot), adapted with ``probe_steps`` of probe."""
+    """The shipped walking prior loaded into a hurdle-crouch specialist whose only drawn scene is the easiest
+    warm-up (a 2 cm bar, the ceiling above the robot), adapted with ``probe_steps`` of probe."""
     cfg = load_config(
-        ["task=hurdle_crouch", "task.scene_variants=1", "task.warmup_variants=1", "num_envs=16", f"run_root={tmp_path}"]
+        [
+            "task=hurdle_crouch",
+            "task.scene_variants=1",
+            "task.warmup_variants=1",
+            "task.terminations.on_collision=false",  # count falls, not touches of the 2 cm bar
+            "num_envs=16",
+            f"run_root={tmp_path}",
+        ]
     )
     env = make_env(cfg)
     runner = make_runner(cfg, env, str(tmp_path))
@@ -67,6 +74,7 @@ def _prior_in_scene(tmp_path, probe_steps: int):
 
 
 def _falls(env, alg, steps: int) -> int:
+    torch.manual_seed(0)  # observation noise
     obs, falls = env.get_observations(), 0
     with torch.no_grad():
         for _ in range(steps):
@@ -77,13 +85,14 @@ def _falls(env, alg, steps: int) -> int:
 
 def test_probe_detaches_only_columns_the_prior_saw_constant_and_the_prior_walks(tmp_path):
     """The probe rollout finds field columns that only go off near obstacles (not at the reset poses), and never
-    a column the prior saw vary; with it the prior walks the trivial warm-up scene as on flat ground."""
+    a column the prior saw vary; with it the prior walks the easiest warm-up scene as on flat ground."""
     env, alg, zeroed, constant = _prior_in_scene(tmp_path / "probe", probe_steps=100)
     terms = env.observation_groups.term_columns(env, "actor")
     assert zeroed.any()
     touched = {terms[i] for i in zeroed.nonzero().flatten().tolist()}
     assert "field_block" in touched and not touched & {"gyro", "projected_gravity", "joint_vel", "last_action"}
     assert not (zeroed & ~constant).any()  # (the held arm joints were constant to it too)
-    _, _, zeroed_at_reset, _ = _prior_in_scene(tmp_path / "reset", probe_steps=0)
+    env_r, alg_r, zeroed_at_reset, _ = _prior_in_scene(tmp_path / "reset", probe_steps=0)
     assert int(zeroed.sum()) > int(zeroed_at_reset.sum())  # the probe saw columns the reset poses did not
-    assert _falls(env, alg, 150) <= 2  # 16 robots, 3 s
+    falls, falls_reset_only = _falls(env, alg, 150), _falls(env_r, alg_r, 150)  # 16 robots, 3 s
+    assert falls <= 4 and falls < falls_reset_only

@@ -14,9 +14,12 @@ needed for a G1 to physically pass):
 Arrows read easy → hard (d = 0 → 1). Positions, gaps and small per-variant jitter come from the seed;
 sizes grow monotonically with d for a fixed seed, so the free-volume fraction falls with d.
 
-Negative difficulties (d ∈ [−1, 0)) interpolate from trivially easy values at d = −1 to the paper's easiest at d =
-0: bars from below the floor (left out under ``MIN_BAR_TOP``), ceilings from ``CLEAR_CEILING`` (above a walking
-G1), slit gaps from 1.3 m, corridors from 1.8 m. They are training-only warm-up scenes (``warmup_variants``) that
+Negative difficulties (d ∈ [−1, 0)) interpolate from trivially easy values to the paper's easiest at d = 0, one
+skill after the other: bars rise from ``BAR_TOP_WARMUP`` (2 cm) to 8 cm over d ∈ [−1, −0.5] under a ceiling out
+of reach, then ceilings come down from ``CLEAR_CEILING`` (above a walking G1) to 1.15 m over [−0.5, 0]; slit gaps
+narrow from 1.3 m and corridors from 1.8 m over [−1, 0]. (Bars first: a policy that learned to crouch before
+meeting its first bar kept its crouched, foot-dragging gait and every bar contact was a foot landing against the
+bar's base; docs/results.md.) They are training-only warm-up scenes (``warmup_variants``) that
 let a difficulty curriculum start where a walking policy already succeeds; the paper's variants and every
 evaluation use d ∈ [0, 1].
 """
@@ -50,7 +53,8 @@ WALL_T = 0.12
 HEIGHT = float(BOUNDS[1, 2])
 HALF_W = float(BOUNDS[1, 1])
 CLEAR_CEILING = 1.42  # warm-up ceiling at d = -1: above a walking G1 (head sphere top 1.33 m at home pose) [m]
-MIN_BAR_TOP = 0.02  # a warm-up bar lower than this is left out (multi-hurdle keeps it, at this height) [m]
+BAR_TOP_WARMUP = 0.02  # bar top at d = -1: a bump a walking gait clears, but feet must not land on it [m]
+BAR_SPAN, CEILING_SPAN = (-1.0, -0.5), (-0.5, 0.0)  # warm-up ranges of d over which bars rise, ceilings drop
 
 
 def lerp(a: float, b: float, t: float) -> float:
@@ -63,31 +67,34 @@ class _Params:
     def __init__(self, d: float, rng: np.random.Generator):
         self.d, self.rng = d, rng
 
-    def __call__(self, easy: float, hard: float, jitter: float = 0.1, trivial: float | None = None) -> float:
-        """``easy`` at d = 0, ``hard`` at d = 1; warm-up scenes (d < 0) go from ``trivial`` at d = −1 to ``easy``
-        (sizes without a ``trivial`` value stay at ``easy``)."""
+    def __call__(
+        self,
+        easy: float,
+        hard: float,
+        jitter: float = 0.1,
+        trivial: float | None = None,
+        span: tuple[float, float] = (-1.0, 0.0),
+    ) -> float:
+        """``easy`` at d = 0, ``hard`` at d = 1; warm-up scenes (d < 0) go from ``trivial`` to ``easy`` as d
+        crosses ``span`` (sizes without a ``trivial`` value stay at ``easy``)."""
         t = self.d + self.rng.uniform(-jitter, jitter)
         if self.d >= 0 or trivial is None:
             return lerp(easy, hard, t)
-        return lerp(trivial, easy, t + 1.0)
+        lo, hi = span
+        return lerp(trivial, easy, (t - lo) / (hi - lo))
 
 
 # Each element is (x-extent, builder(x0) -> parts); builders close over their parameters.
 Element = tuple[float, Callable[[float], list[trimesh.Trimesh]]]
 
 
-def _bar(p: _Params, vanish: bool = True) -> Element:
-    """``vanish``: a warm-up bar lower than ``MIN_BAR_TOP`` is left out (else it stays at that height)."""
-    top, r = p(0.08, 0.25, trivial=-0.1), p(0.08, 0.15)
-    if top < MIN_BAR_TOP:
-        if vanish:
-            return 2 * r, lambda x0: []
-        top = MIN_BAR_TOP
+def _bar(p: _Params) -> Element:
+    top, r = p(0.08, 0.25, trivial=BAR_TOP_WARMUP, span=BAR_SPAN), p(0.08, 0.15)
     return 2 * r, lambda x0: [bar("y", (x0 + r, 0.0, top - r), r, 2 * HALF_W)]
 
 
 def _ceiling(p: _Params, depth: tuple[float, float] = (0.3, 0.6)) -> Element:
-    bottom, dep = p(1.15, 1.00, trivial=CLEAR_CEILING), p(*depth)
+    bottom, dep = p(1.15, 1.00, trivial=CLEAR_CEILING, span=CEILING_SPAN), p(*depth)
     return dep, lambda x0: [box((x0, -HALF_W, bottom), (x0 + dep, HALF_W, HEIGHT))]
 
 
@@ -105,8 +112,8 @@ def _slit(p: _Params, yc: float | None = None) -> Element:
 
 def _low_door(p: _Params) -> Element:
     """Slit wall whose gap is capped by a lintel, continued by a ceiling: side-step and crouch at once."""
-    gap, yc = p(0.90, 0.36, jitter=0.05, trivial=1.3), p.rng.uniform(-0.25, 0.25)
-    bottom, dep = p(1.15, 1.00, trivial=CLEAR_CEILING), p(0.2, 0.5)
+    gap, yc = p(0.90, 0.36, jitter=0.05, trivial=1.3, span=BAR_SPAN), p.rng.uniform(-0.25, 0.25)
+    bottom, dep = p(1.15, 1.00, trivial=CLEAR_CEILING, span=CEILING_SPAN), p(0.2, 0.5)
 
     def build(x0: float) -> list[trimesh.Trimesh]:
         return _slit_parts(x0, gap, yc) + [box((x0, -HALF_W, bottom), (x0 + WALL_T + dep, HALF_W, HEIGHT))]
@@ -158,7 +165,7 @@ def _layout(kind: str, p: _Params) -> list[trimesh.Trimesh]:
         return _sequence([_slit(p, yc=off), _slit(p, yc=-off)], rng, min_gap=0.45)
     if kind == "multi-hurdle":
         n = 2 if p.d < 0.5 else 3
-        return _sequence([_bar(p, vanish=False) for _ in range(n)], rng, min_gap=0.3)  # never an empty scene
+        return _sequence([_bar(p) for _ in range(n)], rng, min_gap=0.3)
     raise SceneError(f"unknown typical scene type {kind!r}; valid: {', '.join(TYPICAL_KINDS)}")
 
 

@@ -69,6 +69,11 @@ def test_warmup_difficulties_take_the_lowest_levels():
     cur = DifficultyCurriculum(d, num_envs=2, cfg=CurriculumCfg(num_levels=4))
     assert cur.scene_level.tolist() == [0, 0, 1, 2, 3, 3]
     assert cur.max_level == 3 and cur.level.tolist() == [0, 0]
+    assert cur.log() == {"Curriculum/mean_level": 0.0, "Curriculum/paper_range": 0.0}
+    cur.update(torch.tensor([1]), torch.tensor([True]))
+    cur.update(torch.tensor([1]), torch.tensor([True]))  # env 1 reaches level 2: the paper's d = 0
+    assert cur.log() == {"Curriculum/mean_level": 1.0, "Curriculum/paper_range": 0.5}
+    assert "Curriculum/paper_range" not in DifficultyCurriculum(DIFF, 2, CurriculumCfg()).log()  # no warm-ups
 
 
 def test_warmup_scenes_train_but_are_never_evaluated(tmp_path):

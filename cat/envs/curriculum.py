@@ -42,6 +42,9 @@ class DifficultyCurriculum:
             last = lvl if present[lvl] else last
             self._source[lvl] = last
         self.max_level = int(self.scene_level.max())
+        # with warm-up scenes: the lowest level holding a scene of the paper's range (d >= 0)
+        paper = self.scene_level[d >= 0]
+        self.first_paper_level = int(paper.min()) if lo < 0 and len(paper) else None
         start = min(max(cfg.start_level, 0), self.max_level)
         self.level = torch.full((num_envs,), start, dtype=torch.long)
 
@@ -63,6 +66,14 @@ class DifficultyCurriculum:
 
     def mean_level(self) -> float:
         return float(self.level.float().mean())
+
+    def log(self) -> dict[str, float]:
+        """``Curriculum/mean_level``; with warm-up scenes also ``Curriculum/paper_range``, the fraction of envs at a
+        level of the paper's difficulty range (past the warm-ups)."""
+        out = {"Curriculum/mean_level": self.mean_level()}
+        if self.first_paper_level is not None:
+            out["Curriculum/paper_range"] = float((self.level >= self.first_paper_level).float().mean())
+        return out
 
     def state_dict(self) -> dict:
         return {"level": self.level.clone()}

@@ -314,7 +314,7 @@ class TraversalEnv(VecEnv):
             extras["log"] = self._episode_log(done_ids)
             if self.curriculum is not None:
                 self.curriculum.update(done_ids, self.episode_success(done_ids))
-                extras["log"]["Curriculum/mean_level"] = self.curriculum.mean_level()
+                extras["log"].update(self.curriculum.log())
             extras["episode_end"] = {
                 "env_ids": done_ids,
                 "success": self.episode_success(done_ids),

@@ -11,6 +11,7 @@ groups that list it; groups with ``noise: true`` add ``NoiseCfg``'s per-term noi
 from __future__ import annotations
 
 import copy
+import math
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
@@ -148,6 +149,14 @@ class ObservationGroups:
 
     def load_state_dict(self, state: dict[str, torch.Tensor]) -> None:
         self.buffers = {k: v.clone() for k, v in state.items()}
+
+
+def noise_std(name: str, scale: float) -> float:
+    """Std of the noise ``_noisy`` adds to term ``name`` at ``scale``: uniform U(-s, s) has s/sqrt(3); a flip with
+    probability p of a {0, 1} cell changes it by +-1 with probability p, std sqrt(p(1 - p)) about its mean."""
+    if name in FLIP_NOISE_TERMS:
+        return math.sqrt(scale * (1.0 - scale))
+    return scale / math.sqrt(3.0)
 
 
 def _noisy(name: str, value: torch.Tensor, scale: float) -> torch.Tensor:

@@ -20,9 +20,12 @@ prior's balance, while a column that was pure noise to the prior carried nothing
 from __future__ import annotations
 
 import logging
+import math
 
 import torch
 from tensordict import TensorDict
+
+from cat.envs.obs_groups import noise_std
 
 log = logging.getLogger(__name__)
 
@@ -99,20 +102,19 @@ def probe_inputs(env, alg, steps: int = PROBE_STEPS, stride: int = PROBE_STRIDE)
 
 def _upright(env) -> torch.Tensor:
     s = env.state
-    tilt = torch.acos((-s.gravity[:, 2]).clamp(-1.0, 1.0))
     low = env.cfg.terminations.min_base_height + 0.2
-    return (tilt < UPRIGHT) & (s.root_pos[:, 2] > low)
+    return (s.gravity[:, 2] < -math.cos(UPRIGHT)) & (s.root_pos[:, 2] > low)  # projected gravity z = -cos(tilt)
 
 
 def _constant_in_prior(env, model) -> torch.Tensor:
-    """(D,) mask of the columns the prior saw as a constant: its normaliser std no larger than the observation
-    noise of the column's term (uniform noise of scale s has std s/sqrt(3)), times ``NOISE_MARGIN``."""
+    """(D,) mask of the columns the prior saw as a constant: its normaliser std no larger than the std of the
+    observation noise of the column's term (``obs_groups.noise_std``), times ``NOISE_MARGIN``."""
     noise = env.cfg.noise
     floor = []
     for g in model.obs_groups:
         noisy = noise.enabled and bool(env.cfg.observations[g].noise)
         for term in env.observation_groups.term_columns(env, g):
-            floor.append(float(getattr(noise, term, 0.0)) / 3**0.5 if noisy else 0.0)
+            floor.append(noise_std(term, float(getattr(noise, term, 0.0))) if noisy else 0.0)
     floor = torch.tensor(floor).clamp_min(MIN_STD) * NOISE_MARGIN
     return model.obs_normalizer._std[0] <= floor
 

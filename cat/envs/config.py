@@ -166,6 +166,10 @@ class RewardParamsCfg:
     # feet_clearance penalises only swing feet *below* the target (a hurdle needs more than 7 cm; the two-sided
     # release term trains the feet to graze an 8 cm bar). Off (two-sided) for flat ground, on for obstacle tasks.
     foot_clearance_min_only: bool = False
+    # > 0: the swing-foot target rides on the obstacles: foot_clearance above the highest ground-layer cell of the
+    # elevation map under the foot and this far ahead along its horizontal motion (hurdles); 0: above the floor
+    foot_clearance_lookahead: float = 0.0  # [m]
+    foot_clearance_step_max: float = 0.4  # taller ground-layer cells are walls, not hurdles: they raise no target [m]
     knee_min: float = 0.2  # knee_straight: penalise knee angles below this [rad]
     barrier_margin: float = 0.05  # sdf_barrier: softplus((margin - d) / width) at each query link [m]
     barrier_width: float = 0.02  # [m]; map_clearance uses the same margin and width on the elevation map

@@ -126,12 +126,27 @@ def feet_phase_contact(env: TraversalEnv) -> torch.Tensor:
 
 def feet_clearance(env: TraversalEnv) -> torch.Tensor:
     """Swing feet should lift to ``params.foot_clearance`` (weighted by their horizontal speed); with
-    ``params.foot_clearance_min_only`` only a foot below it is penalised (higher is free: hurdles)."""
+    ``params.foot_clearance_min_only`` only a foot below it is penalised (higher is free: hurdles).
+
+    With ``params.foot_clearance_lookahead`` > 0 the target is measured from the obstacles' top (the elevation
+    map's ground layer, the highest of the cell under the foot and the cell that far ahead along the foot's
+    motion), so a swing foot must rise over a bar before it reaches it rather than graze its base. Cells taller
+    than ``params.foot_clearance_step_max`` (walls) raise no target.
+    """
     p = env.cfg.rewards.params
     swing = ~_stance(env)
     z = env.state.foot_pos[..., 2]
-    speed = env.state.foot_vel[..., :2].norm(dim=-1)
-    error = z - p.foot_clearance
+    vel = env.state.foot_vel[..., :2]
+    speed = vel.norm(dim=-1)
+    target = torch.full_like(z, p.foot_clearance)
+    if p.foot_clearance_lookahead > 0:
+        xy = env.state.foot_pos[..., :2]
+        ahead = xy + p.foot_clearance_lookahead * vel / speed.clamp_min(1e-3)[..., None]
+        ground, _ = env.perception.layers_at(torch.cat((xy, ahead), dim=1))
+        ground = ground * (ground <= p.foot_clearance_step_max)  # walls are side-stepped, not hurdled
+        under, front = ground.split(z.shape[1], dim=1)
+        target = target + torch.maximum(under, front)
+    error = z - target
     if p.foot_clearance_min_only:
         error = error.clamp_max(0.0)
     return (error.square() * speed * swing).sum(dim=-1)

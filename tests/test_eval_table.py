@@ -280,3 +280,19 @@ def test_old_run_configs_keep_their_scenes(tmp_path):
     cfg["task"]["scene_seed"] = 2
     (run / "config.yaml").write_text(yaml.safe_dump(cfg))
     assert load_run_config(run / "model_0.pt").task.scene_seed == 2
+
+
+def test_generalist_runs_are_evaluated_one_group_at_a_time():
+    """A run over several typical groups names the group to evaluate; each group gives its own kind's variants."""
+    task = load_config(["task=generalist", "task.scene_variants=2", "task.scene_groups=[crouch-pass,side-pass]"]).task
+    with pytest.raises(ValueError, match=r"several scene groups \['crouch-pass', 'side-pass'\].*scene_kind="):
+        run_scene_group(task)
+    for kind in ("crouch-pass", "side_pass"):
+        group = run_scene_group(task, scene_kind=kind)
+        want = typical_variants(kind.replace("_", "-"), 2, task.scene_seed)
+        assert [s.kind for s in group.scenes] == [kind.replace("_", "-")] * 2
+        for got, ref in zip(group.scenes, want, strict=True):
+            np.testing.assert_array_equal(got.mesh.vertices, ref.mesh.vertices)
+    assert task.scene_groups == ["crouch-pass", "side-pass"]  # the run's config is left as it was
+    with pytest.raises(ValueError, match="scene_kind='stairs' is not a typical kind"):
+        run_scene_group(task, scene_kind="stairs")

@@ -29,7 +29,7 @@ from cat.envs.traversal_env import TraversalEnv
 from cat.eval.metrics import TrialResult
 from cat.eval.trials import Trial
 from cat.fields import Field
-from cat.terrain import Scene, typical_variants
+from cat.terrain import TYPICAL_KINDS, Scene, typical_variants
 
 log = logging.getLogger(__name__)
 
@@ -85,12 +85,27 @@ class SceneGroup:
         return SceneSet(self.scenes, self.fields, num_envs, device, per_world=per_world)
 
 
-def run_scene_group(task: EnvCfg, scene_seed: int | None = None, scene_dir: str = "") -> SceneGroup | None:
-    """The scenes a run trained on (``None``: flat ground), unless ``scene_seed`` / ``scene_dir`` override them.
+def run_scene_group(
+    task: EnvCfg, scene_seed: int | None = None, scene_dir: str = "", scene_kind: str = ""
+) -> SceneGroup | None:
+    """The scenes a run trained on (``None``: flat ground), unless ``scene_seed`` / ``scene_dir`` /
+    ``scene_kind`` override them.
 
     Typical tasks rebuild their variants from ``task.scene_seed`` (not the RL seed); dataset tasks read
-    ``task.scene_dir`` filtered to ``task.scene_kind``.
+    ``task.scene_dir`` filtered to ``task.scene_kind``. A run over several typical groups (a generalist's
+    ``task.scene_groups``) is evaluated one group at a time: ``scene_kind`` names it.
     """
+    if scene_kind:
+        kind = scene_kind.replace("_", "-")
+        if kind not in TYPICAL_KINDS:
+            raise ValueError(f"scene_kind={scene_kind!r} is not a typical kind; valid: {', '.join(TYPICAL_KINDS)}")
+        task = copy.copy(task)
+        task.scene_kind, task.scene_groups = kind, []
+    elif task.scene_groups and not (scene_dir or task.scene_dir):
+        raise ValueError(
+            f"the run trained on several scene groups {list(task.scene_groups)}: evaluate one at a time "
+            f"with scene_kind=<group>"
+        )
     if scene_dir or task.scene_dir:
         group = SceneGroup.from_dir("scenes", scene_dir or task.scene_dir)
         if task.scene_kind and not scene_dir:

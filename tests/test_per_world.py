@@ -204,11 +204,11 @@ def test_snapshots_do_not_cross_layouts(scenes, fields, env):
         env.set_state(tiles.get_state())
 
 
-def test_per_world_needs_the_mujoco_backend(scenes, fields):
-    with pytest.raises(NotImplementedError, match="per_world_scenes=true needs sim=mujoco"):
-        check_per_world("warp")
-    with pytest.raises(NotImplementedError, match="docs/scenes.md"):
-        TraversalEnv(EnvCfg(num_envs=2), sim="warp", scenes=SceneSet(scenes, fields, 2, per_world=True))
+def test_per_world_backends(scenes, fields):
+    check_per_world("mujoco")
+    check_per_world("warp")  # slot model: tests/test_warp_slots.py
+    with pytest.raises(ValueError, match="unknown sim backend"):
+        check_per_world("bullet")
     with pytest.raises(SceneSetError, match="one model per scene"):
         SceneSet(scenes, fields, 2, per_world=True).add_to_spec(mujoco.MjSpec())
 

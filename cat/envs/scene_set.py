@@ -8,7 +8,8 @@ Two layouts of the physics worlds (``per_world``, the run's ``sim.per_world_scen
 * tiles (default): all scenes live in every world, side by side on a grid of tiles (``tile_spacing`` apart); one
   compiled model serves both backends and obstacles of other tiles are never reached;
 * per world: each world holds only its own scene, in the scene's frame (every offset is zero); one compiled model
-  per scene (``cat.envs.scene_models``), swapped per world when an env changes scene at reset (``sim=mujoco``).
+  per scene (``cat.envs.scene_models``), swapped per world when an env changes scene at reset (``sim=warp``: a
+  slot model, ``cat.envs.sim.warp_slots``).
 
 Env ``i`` starts in scene ``i % num_scenes``. Fields come from the scene folders (``fields/humanoid_pf.npz``,
 written by ``scripts/gen_scenes.py``) or are built on load; their grid origins are shifted by the scene's offset

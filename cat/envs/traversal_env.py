@@ -103,9 +103,9 @@ class TraversalEnv(VecEnv):
             for m in models:
                 make_obstacles_ghost(m)
         model = models[0]
-        self.sim = make_backend(sim, model, self.num_envs, self.robot.decimation, device=device)
-        if self.world_models is not None:
-            self.sim.set_model_table(self.world_models.models)
+        self.sim = make_backend(
+            sim, model, self.num_envs, self.robot.decimation, device=device, world_models=self.world_models
+        )
         self.device = self.sim.device
         self.field = None
         self.curriculum = None

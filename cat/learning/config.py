@@ -13,7 +13,7 @@ from cat.envs.config import EnvCfg
 class SimCfg:
     backend: str = "mujoco"  # mujoco | warp
     device: str = "cpu"  # torch device of the env tensors (cuda:0 needs sim=warp)
-    per_world_scenes: bool = False  # each world holds only its own scene (sim=mujoco; docs/scenes.md); else tiles
+    per_world_scenes: bool = False  # each world holds only its own scene (docs/scenes.md); else tiles
 
 
 ALGOS = ("ppo", "distill")

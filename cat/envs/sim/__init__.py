@@ -3,26 +3,25 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import mujoco
 
 from cat.envs.scene import COLLISION_SENSOR
 from cat.envs.sim.base import PhysicsBackend
 
+if TYPE_CHECKING:
+    from cat.envs.scene_models import WorldModels
+
 BACKENDS = ("mujoco", "warp")
-PER_WORLD_BACKENDS = ("mujoco",)
+PER_WORLD_BACKENDS = ("mujoco", "warp")
 
 
 def check_per_world(name: str) -> None:
-    """Per-world scene models (``sim.per_world_scenes``) need ``sim=mujoco``; raise a clear error otherwise."""
-    if name == "warp":
-        raise NotImplementedError(
-            "sim.per_world_scenes=true needs sim=mujoco. mujoco_warp 4.0 steps every world on one Model: it "
-            "batches some fields per world (geom_dataid, geom_pos/quat/size/aabb, actuator gains, body masses) "
-            "but not geom types or counts, so per-scene models cannot be swapped in (docs/scenes.md, 'Per-world "
-            "scenes', describes the slot model that would be needed). With sim=warp use "
-            "sim.per_world_scenes=false (scenes side by side on tiles)."
-        )
+    """Per-world scene models (``sim.per_world_scenes``): ``sim=mujoco`` swaps each world's model, ``sim=warp``
+    steps a slot model (``cat.envs.sim.warp_slots``). What the slots cannot represent (obstacle geoms other than
+    mesh / box / height field, obstacle contact properties that differ between scenes) raises ``SlotError``
+    when the backend is built."""
     if name not in PER_WORLD_BACKENDS:
         raise ValueError(f"unknown sim backend {name!r}; valid: {', '.join(BACKENDS)}")
 
@@ -34,8 +33,11 @@ def make_backend(
     decimation: int,
     device: str = "cpu",
     max_sensors: Sequence[str] | None = None,
+    world_models: WorldModels | None = None,
 ) -> PhysicsBackend:
     """Build the backend ``name`` for ``num_envs`` worlds; ``device`` is a torch device string.
+
+    ``world_models``: per-world scenes; every world starts on ``world_models.models[0]`` (``assign_models``).
 
     ``max_sensors``: sensors reported as their maximum over the substeps of a control step; ``None``: the
     robot-obstacle contact sensor when the model has one (collisions count on every physics substep).
@@ -48,10 +50,15 @@ def make_backend(
             raise ValueError(f"sim=mujoco runs on the CPU; got device={device!r}. Use sim=warp for CUDA.")
         from cat.envs.sim.mujoco_backend import MujocoBackend
 
-        return MujocoBackend(model, num_envs, decimation, max_sensors=max_sensors)
+        backend = MujocoBackend(model, num_envs, decimation, max_sensors=max_sensors)
+        if world_models is not None:
+            backend.set_model_table(world_models.models)
+        return backend
     if name == "warp":
         from cat.envs.sim.warp_backend import WarpBackend
+        from cat.envs.sim.warp_slots import SlotTable
 
         dev = "cpu" if device.startswith("cpu") else device
-        return WarpBackend(model, num_envs, decimation, device=dev, max_sensors=max_sensors)
+        slots = SlotTable.build(world_models.robot, world_models.models) if world_models is not None else None
+        return WarpBackend(model, num_envs, decimation, device=dev, max_sensors=max_sensors, slots=slots)
     raise ValueError(f"unknown sim backend {name!r}; valid: {', '.join(BACKENDS)}")

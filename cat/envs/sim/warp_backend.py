@@ -28,6 +28,12 @@ raise (``check_overflow``), so a dropped contact is an error, never a silent und
 
 ``max_sensors`` columns: a small kernel inside the captured decimation loop keeps their running max over the
 substeps and writes it into ``sensordata`` after the last one.
+
+Per-world scenes (``slots``, ``sim.per_world_scenes``): the backend steps a slot model
+(``cat.envs.sim.warp_slots``) whose obstacle geom rows are batched per world; ``assign_models`` copies a table
+model's rows (and its robot gains and masses, which pool members differ in) into the chosen worlds with torch
+indexing on the ``wp.to_torch`` views: no reallocation, the captured graphs stay valid. World i then behaves as
+``MujocoBackend`` world i on ``table[model_ids[i]]``.
 """
 
 from __future__ import annotations
@@ -43,6 +49,7 @@ import torch
 import warp as wp
 
 from cat.envs.sim.base import PhysicsBackend
+from cat.envs.sim.warp_slots import SLOT_FIELDS, SlotTable, SlotWriter
 from cat.fields import init_warp
 
 logger = logging.getLogger(__name__)
@@ -148,6 +155,8 @@ class WarpBackend(PhysicsBackend):
             mujoco_warp's ~140 kernel launches per physics step: 20x faster at N=3, ~1.5-2x at N=64-256).
             ``False``: launch eagerly.
         max_sensors: sensors reported as their max over the substeps (see ``cat.envs.sim.base``).
+        slots: per-world scenes: step ``slots.model`` (``model`` is then only checked against it) with each
+            world on a model of ``slots.table`` (``assign_models``; all start on model 0).
     """
 
     def __init__(
@@ -160,8 +169,14 @@ class WarpBackend(PhysicsBackend):
         njmax: int = DEFAULT_NJMAX,
         graph: bool = True,
         max_sensors: Sequence[str] = (),
+        slots: SlotTable | None = None,
     ):
+        if slots is not None:
+            if slots.model.nsensordata != model.nsensordata or slots.model.nq != model.nq:
+                raise ValueError("WarpBackend: slots.model does not fit model (sensors or state differ)")
+            model = slots.model
         super().__init__(model, num_envs, decimation, max_sensors)
+        self.slots = slots
         self.wp_device = wp.get_device(resolve_device(device))
         self.device = torch.device(wp.device_to_torch(self.wp_device))
         self.nconmax, self.njmax = nconmax, njmax
@@ -173,7 +188,10 @@ class WarpBackend(PhysicsBackend):
             self._wp_stream = wp.stream_from_torch(self._stream)
 
         with wp.ScopedDevice(self.wp_device):  # allocations land on the chosen device
-            self.m = mjw.put_model(model, batch_sizes={f: num_envs for f in _PER_WORLD_FIELDS})
+            batch = {f: num_envs for f in _PER_WORLD_FIELDS}
+            if slots is not None:  # >= 2 rows: mujoco_warp honours geom_dataid = -1 only when it is batched
+                batch.update({f: max(num_envs, 2) for f in SLOT_FIELDS})
+            self.m = mjw.put_model(model, batch_sizes=batch)
             self.m.opt.warn_overflow = int(BUFFER_OVERFLOWS)  # print buffer overflows, not solver iterations
             self.d = mjw.make_data(model, nworld=num_envs, nconmax=nconmax, njmax=njmax)
             self._reset_mask = wp.zeros(num_envs, dtype=bool)
@@ -199,6 +217,13 @@ class WarpBackend(PhysicsBackend):
             or self.m.nplastic
             or model.opt.enableflags & mujoco.mjtEnableBit.mjENBL_SLEEP
         )
+        self._model_ids = torch.zeros(num_envs, dtype=torch.long)
+        self._writer: SlotWriter | None = None
+        if slots is not None:
+            views = {f: wp.to_torch(getattr(self.m, f)) for f in (*SLOT_FIELDS, *_PER_WORLD_FIELDS)}
+            data_views = {f: wp.to_torch(getattr(d, f)) for f in ("geom_xpos", "geom_xmat")}
+            self._writer = SlotWriter(slots, views, data_views)
+            self.assign_models(torch.arange(num_envs), torch.zeros(num_envs, dtype=torch.long))
 
         with self._sim_stream():
             mjw.reset_data(self.m, d)
@@ -305,10 +330,48 @@ class WarpBackend(PhysicsBackend):
             yield
         caller.wait_stream(self._stream)
 
+    # --- per-world models (slots) ------------------------------------------------------------------------
     def set_model_table(self, models) -> None:
-        from cat.envs.sim import check_per_world
+        """The table is fixed when the backend is built (``slots``): accepted only if it is that table."""
+        if (
+            self.slots is None
+            or len(models) != len(self.slots.table)
+            or any(a is not b for a, b in zip(models, self.slots.table, strict=True))
+        ):
+            raise NotImplementedError(
+                "WarpBackend compiles its slot model from the model table when it is built: pass "
+                "slots=SlotTable.build(robot, models) (cat.envs.sim.make_backend(..., world_models=...) does)"
+            )
 
-        check_per_world("warp")
+    def assign_models(self, env_ids, model_ids) -> None:
+        """World ``env_ids[k]`` steps ``table[model_ids[k]]`` from now on (its state is left as it is: reset it)."""
+        if self._writer is None:
+            raise RuntimeError("assign_models needs a WarpBackend built with slots")
+        ids = torch.as_tensor(env_ids, dtype=torch.long).reshape(-1).cpu()
+        mids = torch.as_tensor(model_ids, dtype=torch.long).reshape(-1).cpu()
+        if ((mids < 0) | (mids >= len(self.slots.table))).any():
+            raise IndexError(f"model ids out of range for a table of {len(self.slots.table)} models")
+        self._model_ids[ids] = mids
+        with self._sim_stream():
+            self._writer.write(ids.to(self.device), mids.to(self.device))
+
+    @property
+    def model_ids(self) -> torch.Tensor:
+        """(N,) index into the model table of each world's model (zeros without slots)."""
+        return self._model_ids.clone()
+
+    def get_state(self) -> dict[str, torch.Tensor]:
+        state = super().get_state()
+        if self.slots is not None:
+            state["model_ids"] = self.model_ids
+        return state
+
+    def set_state(self, state: dict[str, torch.Tensor]) -> None:
+        if (self.slots is not None) != ("model_ids" in state):
+            raise ValueError("sim snapshot and backend disagree on per-world models (model_ids)")
+        if self.slots is not None:
+            self.assign_models(torch.arange(self.num_envs), state["model_ids"])
+        super().set_state(state)
 
     # --- domain randomisation: per-world model arrays ---------------------------------------------------
     def set_actuator_gains(self, env_ids: torch.Tensor, kp: torch.Tensor, kd: torch.Tensor) -> None:

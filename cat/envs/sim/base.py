@@ -97,8 +97,11 @@ class PhysicsBackend(ABC):
 
     # --- snapshots (exact resume of a training run) ---------------------------------------------------------
     def get_state(self) -> dict[str, torch.Tensor]:
-        """Copies of every world's qpos, qvel and sensordata."""
-        return {"qpos": self.qpos.clone(), "qvel": self.qvel.clone(), "sensordata": self.sensordata.clone()}
+        """Copies of every world's qpos, qvel and sensordata (and its model id with per-world models)."""
+        state = {"qpos": self.qpos.clone(), "qvel": self.qvel.clone(), "sensordata": self.sensordata.clone()}
+        if self.per_world_models:
+            state["model_ids"] = self.model_ids
+        return state
 
     def set_state(self, state: dict[str, torch.Tensor]) -> None:
         """Restore ``get_state``'s snapshot into all worlds (sensors as they were, not recomputed)."""
@@ -106,10 +109,24 @@ class PhysicsBackend(ABC):
             raise ValueError(
                 f"sim snapshot of shape {tuple(state['qpos'].shape)} does not fit {tuple(self.qpos.shape)}"
             )
+        if self.per_world_models != ("model_ids" in state):
+            raise ValueError("sim snapshot and backend disagree on per-world models (model_ids)")
+        if self.per_world_models:
+            self.assign_models(torch.arange(self.num_envs), state["model_ids"])
         self.reset(torch.arange(self.num_envs), state["qpos"], state["qvel"])
         self._sens.copy_(state["sensordata"].to(self._sens))
 
     # --- per-world models (sim.per_world_scenes) ---------------------------------------------------------
+    @property
+    def per_world_models(self) -> bool:
+        """Whether each world steps its own model of a table (``set_model_table``)."""
+        return False
+
+    @property
+    def model_ids(self) -> torch.Tensor:
+        """(N,) index into the model table of each world's model."""
+        raise NotImplementedError(f"{type(self).__name__} does not support per-world models")
+
     def set_model_table(self, models: Sequence[mujoco.MjModel]) -> None:
         """Let each world step its own model of ``models`` (``assign_models``); backends that cannot raise."""
         raise NotImplementedError(f"{type(self).__name__} does not support per-world models")

@@ -200,18 +200,9 @@ class MujocoBackend(PhysicsBackend):
             self._class_models = {c: [self._shared_models[i] for i in ids] for c, ids in self._classes.items()}
         return self._classes
 
-    def get_state(self) -> dict[str, torch.Tensor]:
-        state = super().get_state()
-        if self._table is not None:
-            state["model_ids"] = self.model_ids
-        return state
-
-    def set_state(self, state: dict[str, torch.Tensor]) -> None:
-        if (self._table is not None) != ("model_ids" in state):
-            raise ValueError("sim snapshot and backend disagree on per-world models (model_ids)")
-        if self._table is not None:
-            self.assign_models(np.arange(self.num_envs), state["model_ids"])
-        super().set_state(state)
+    @property
+    def per_world_models(self) -> bool:
+        return self._table is not None
 
     # --- domain randomisation: per-world model copies ---------------------------------------------------
     def _world_models(self) -> list[mujoco.MjModel]:

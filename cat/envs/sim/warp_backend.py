@@ -360,18 +360,9 @@ class WarpBackend(PhysicsBackend):
         """(N,) index into the model table of each world's model (zeros without slots)."""
         return self._model_ids.clone()
 
-    def get_state(self) -> dict[str, torch.Tensor]:
-        state = super().get_state()
-        if self.slots is not None:
-            state["model_ids"] = self.model_ids
-        return state
-
-    def set_state(self, state: dict[str, torch.Tensor]) -> None:
-        if (self.slots is not None) != ("model_ids" in state):
-            raise ValueError("sim snapshot and backend disagree on per-world models (model_ids)")
-        if self.slots is not None:
-            self.assign_models(torch.arange(self.num_envs), state["model_ids"])
-        super().set_state(state)
+    @property
+    def per_world_models(self) -> bool:
+        return self.slots is not None
 
     # --- domain randomisation: per-world model arrays ---------------------------------------------------
     def set_actuator_gains(self, env_ids: torch.Tensor, kp: torch.Tensor, kd: torch.Tensor) -> None:

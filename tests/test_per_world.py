@@ -20,7 +20,7 @@ from cat.envs.scene_models import (
     layout_classes,
 )
 from cat.envs.scene_set import SceneSet, SceneSetError, scene_fields
-from cat.envs.sim import check_per_world
+from cat.envs.sim import check_backend
 from cat.envs.sim.mujoco_backend import MujocoBackend
 from cat.envs.traversal_env import TraversalEnv
 from cat.terrain import typical_variants
@@ -205,10 +205,10 @@ def test_snapshots_do_not_cross_layouts(scenes, fields, env):
 
 
 def test_per_world_backends(scenes, fields):
-    check_per_world("mujoco")
-    check_per_world("warp")  # slot model: tests/test_warp_slots.py
+    check_backend("mujoco")
+    check_backend("warp")  # slot model: tests/test_warp_slots.py
     with pytest.raises(ValueError, match="unknown sim backend"):
-        check_per_world("bullet")
+        check_backend("bullet")
     with pytest.raises(SceneSetError, match="one model per scene"):
         SceneSet(scenes, fields, 2, per_world=True).add_to_spec(mujoco.MjSpec())
 

@@ -39,7 +39,7 @@ from cat.envs.scene import (
     query_pos_sensor,
     query_vel_sensor,
 )
-from cat.envs.sim import check_per_world, make_backend
+from cat.envs.sim import check_backend, make_backend
 from cat.eval.metrics import TrialMetrics, horizontal_distance
 from cat.fields import FieldCfg, humanoid_pf
 
@@ -94,7 +94,7 @@ class TraversalEnv(VecEnv):
         if scenes is not None and scenes.per_world:
             from cat.envs.scene_models import WorldModels
 
-            check_per_world(sim)
+            check_backend(sim)  # before the scene models are built
             self.world_models = WorldModels.build(self.robot, scenes.scenes, cfg.domain_rand, seed)
             models = self.world_models.models
         else:

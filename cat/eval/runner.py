@@ -29,7 +29,7 @@ from cat.envs.traversal_env import TraversalEnv
 from cat.eval.metrics import TrialResult
 from cat.eval.trials import Trial
 from cat.fields import Field
-from cat.terrain import TYPICAL_KINDS, Scene, typical_variants
+from cat.terrain import TYPICAL_KINDS, Scene, kind_name, typical_variants
 
 log = logging.getLogger(__name__)
 
@@ -96,7 +96,7 @@ def run_scene_group(
     ``task.scene_groups``) is evaluated one group at a time: ``scene_kind`` names it.
     """
     if scene_kind:
-        kind = scene_kind.replace("_", "-")
+        kind = kind_name(scene_kind)
         if kind not in TYPICAL_KINDS:
             raise ValueError(f"scene_kind={scene_kind!r} is not a typical kind; valid: {', '.join(TYPICAL_KINDS)}")
         task = copy.copy(task)

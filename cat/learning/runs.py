@@ -16,14 +16,14 @@ from rsl_rl.runners import DistillationRunner, OnPolicyRunner
 
 import cat
 from cat.envs.obs_groups import resolve_groups, upgrade_legacy_observations
-from cat.envs.sim import BACKENDS
+from cat.envs.sim import check_backend
 from cat.envs.traversal_env import TraversalEnv
 from cat.learning.config import ALGOS, TrainCfg, check_obs_groups, policy_model, runner_cfg, student_model_cfg
 from cat.learning.distill import check_teachers, distill_runner_cfg, load_specialists
 from cat.learning.progress import BudgetReached, install_iteration_hook, quiet_constructor
 from cat.learning.rerun_writer import prune_metrics
 from cat.learning.warm_start import adapt_to_new_inputs
-from cat.terrain import TYPICAL_KINDS
+from cat.terrain import TYPICAL_KINDS, kind_name
 
 log = logging.getLogger(__name__)
 
@@ -135,13 +135,13 @@ def validate_train_cfg(cfg: TrainCfg) -> None:
         if value < 0:
             raise ValueError(f"{key}={value}: must be >= 0 (0 = off / default)")
     if cfg.task.scene_kind:
-        cfg.task.scene_kind = cfg.task.scene_kind.replace("_", "-")  # task names use _, scene kinds use -
+        cfg.task.scene_kind = kind_name(cfg.task.scene_kind)
         if not cfg.task.scene_dir and cfg.task.scene_kind not in TYPICAL_KINDS:
             raise ValueError(
                 f"task.scene_kind={cfg.task.scene_kind!r} without task.scene_dir must be a typical kind: "
                 f"{', '.join(TYPICAL_KINDS)}"
             )
-    cfg.task.scene_groups = [k.replace("_", "-") for k in cfg.task.scene_groups]
+    cfg.task.scene_groups = [kind_name(k) for k in cfg.task.scene_groups]
     for kind in cfg.task.scene_groups:
         if cfg.task.scene_dir:
             raise ValueError("task.scene_groups builds typical scenes: it cannot be used with task.scene_dir")
@@ -180,8 +180,7 @@ def validate_train_cfg(cfg: TrainCfg) -> None:
             raise ValueError("rsl_rl's Distillation rejects symmetry: set algo.symmetry_augment=false")
     elif cfg.teachers:
         raise ValueError("teachers= is for algo=distill")
-    if cfg.sim.backend not in BACKENDS:
-        raise ValueError(f"unknown sim backend {cfg.sim.backend!r}; valid: {', '.join(BACKENDS)}")
+    check_backend(cfg.sim.backend)
     # a resumed run's init= is history (its weights are in the checkpoint): only the file to read is checked
     path = cfg.resume or cfg.init
     if path:

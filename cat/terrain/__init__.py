@@ -9,12 +9,13 @@ from cat.terrain.furniture import House, make_house
 from cat.terrain.indoor import IndoorCfg, make_indoor
 from cat.terrain.procedural import ProceduralCfg, make_procedural
 from cat.terrain.scene import GOAL_HEIGHT, Scene, SceneError, check_scene, load_mesh
-from cat.terrain.typical import TYPICAL_KINDS, make_typical, typical_variants, warmup_variants
+from cat.terrain.typical import TYPICAL_KINDS, kind_name, make_typical, typical_variants, warmup_variants
 from cat.terrain.voxel import VOXEL, GridSpec, ReachCfg
 
 __all__ = [
     "GOAL_HEIGHT",
     "TYPICAL_KINDS",
+    "kind_name",
     "VOXEL",
     "Front3DError",
     "GridSpec",

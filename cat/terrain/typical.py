@@ -44,6 +44,13 @@ TYPICAL_KINDS = (
     "side-pass",
     "multi-hurdle",
 )
+
+
+def kind_name(name: str) -> str:
+    """A scene kind as scenes spell it: task names and command lines use ``_`` (side_pass), kinds ``-``."""
+    return name.replace("_", "-")
+
+
 BOUNDS = np.array([[-0.5, -1.0, 0.0], [2.5, 1.0, 1.5]])
 START = np.array([0.0, 0.0, GOAL_HEIGHT])
 GOAL = np.array([2.0, 0.0, GOAL_HEIGHT])

@@ -13,16 +13,17 @@ from cat.envs.sim.base import PhysicsBackend
 if TYPE_CHECKING:
     from cat.envs.scene_models import WorldModels
 
-BACKENDS = ("mujoco", "warp")
-PER_WORLD_BACKENDS = ("mujoco", "warp")
+BACKENDS = ("mujoco", "warp")  # both support per-world scenes (``sim.per_world_scenes``; docs/scenes.md)
 
 
-def check_per_world(name: str) -> None:
-    """Per-world scene models (``sim.per_world_scenes``): ``sim=mujoco`` swaps each world's model, ``sim=warp``
-    steps a slot model (``cat.envs.sim.warp_slots``). What the slots cannot represent (obstacle geoms other than
-    mesh / box / height field, obstacle contact properties that differ between scenes) raises ``SlotError``
-    when the backend is built."""
-    if name not in PER_WORLD_BACKENDS:
+def check_backend(name: str) -> None:
+    """Refuse an unknown backend name before anything is built.
+
+    Per-world scene models: ``sim=mujoco`` swaps each world's model, ``sim=warp`` steps a slot model
+    (``cat.envs.sim.warp_slots``); what the slots cannot represent (obstacle geoms other than mesh / box / height
+    field, obstacle contact properties that differ between scenes) raises ``SlotError`` when the backend is built.
+    """
+    if name not in BACKENDS:
         raise ValueError(f"unknown sim backend {name!r}; valid: {', '.join(BACKENDS)}")
 
 
@@ -42,6 +43,7 @@ def make_backend(
     ``max_sensors``: sensors reported as their maximum over the substeps of a control step; ``None``: the
     robot-obstacle contact sensor when the model has one (collisions count on every physics substep).
     """
+    check_backend(name)
     if max_sensors is None:
         names = {model.sensor(i).name for i in range(model.nsensor)}
         max_sensors = (COLLISION_SENSOR,) if COLLISION_SENSOR in names else ()
@@ -54,11 +56,9 @@ def make_backend(
         if world_models is not None:
             backend.set_model_table(world_models.models)
         return backend
-    if name == "warp":
-        from cat.envs.sim.warp_backend import WarpBackend
-        from cat.envs.sim.warp_slots import SlotTable
+    from cat.envs.sim.warp_backend import WarpBackend
+    from cat.envs.sim.warp_slots import SlotTable
 
-        dev = "cpu" if device.startswith("cpu") else device
-        slots = SlotTable.build(world_models.robot, world_models.models) if world_models is not None else None
-        return WarpBackend(model, num_envs, decimation, device=dev, max_sensors=max_sensors, slots=slots)
-    raise ValueError(f"unknown sim backend {name!r}; valid: {', '.join(BACKENDS)}")
+    dev = "cpu" if device.startswith("cpu") else device
+    slots = SlotTable.build(world_models.robot, world_models.models) if world_models is not None else None
+    return WarpBackend(model, num_envs, decimation, device=dev, max_sensors=max_sensors, slots=slots)

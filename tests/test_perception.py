@@ -185,8 +185,9 @@ def test_mirror_of_mirrored_state_in_mirrored_scene(scene_env):
 
 
 def test_terrain_aware_foot_clearance_targets_the_obstacle_top(scene_env):
-    """feet_clearance with a lookahead: a swing foot 15 cm up, 0.22 m before the 0.32 m box and moving towards it (0.3 m lookahead),
-    must be at 0.32 + foot_clearance; the same foot beside the box (flat floor ahead) is not penalised."""
+    """feet_clearance with a lookahead: a swing foot 15 cm up, 0.22 m before the 0.32 m box and moving towards it
+    (0.3 m lookahead), must be at 0.32 + foot_clearance; the same foot beside the box (flat floor ahead) is not
+    penalised."""
     from cat.envs.mdp import rewards as rew
 
     env = scene_env

@@ -89,6 +89,13 @@ def _parts(kind: str, d: float) -> list:
     return sorted((round(float(p.bounds[0, 2]), 3), round(float(p.bounds[1, 2]), 3)) for p in parts)
 
 
+def _bar_width(kind: str, d: float) -> float:
+    """Floor-level x extent of the lowest part (the bar) of a typical scene."""
+    parts = make_typical(kind, d, seed=0).mesh.split(only_watertight=False)
+    bar = min(parts, key=lambda p: p.bounds[1, 2])
+    return float(bar.bounds[1, 0] - bar.bounds[0, 0])
+
+
 def test_warmup_extremes():
     """Hurdle-crouch warm-ups teach one skill after the other: at d = -1 a 2 cm bar under a ceiling out of reach
     (1.42 m), at d = -0.5 the paper's easiest bar (8 cm) with the ceiling still up, then the ceiling comes down to
@@ -100,5 +107,8 @@ def test_warmup_extremes():
         assert 0.07 <= bar_hi <= 0.09  # the paper's easiest bar (jitter clipped at its easy end)
         assert ceil_lo >= 1.33 if d == -0.5 else 1.14 <= ceil_lo <= 1.17
     assert all(0.02 <= top <= 0.035 for _, top in _parts("multi-hurdle", -1.0))
+    for kind, d_full in (("hurdle-crouch", -0.5), ("hurdle-pass", 0.0)):  # bars widen 4 -> 16 cm at the floor
+        widths = [_bar_width(kind, d) for d in (-1.0, d_full)]
+        assert widths[0] <= 0.055 and widths[1] >= 0.14, (kind, widths)  # (jitter)
     with pytest.raises(SceneError, match="difficulty"):
         make_typical("hurdle-crouch", -1.5)

@@ -2,9 +2,10 @@
 and rewards and the episode resets by cause.
 
 Scenes: the eight typical types, two procedural and two indoor scenes (cached in ``--data``), tiled in one
-model as ``SceneSet`` does today. Actions are uniform in [-1, 1], pushes on. Reward terms are counted *before*
-the env's ``nan_to_num`` (the term functions are wrapped for the run), so a non-finite value cannot hide;
-termination terms are wrapped the same way to attribute each reset to its cause(s).
+model, or with ``--per-world`` one scene per world (``sim.per_world_scenes``); ``--sim warp`` runs mujoco_warp.
+Actions are uniform in [-1, 1], pushes on. Reward terms are counted *before* the env's ``nan_to_num`` (the term
+functions are wrapped for the run), so a non-finite value cannot hide; each reset is attributed to the termination
+terms that fired (the env's ``termination_flags``), or ``time_out``.
 Prints ``case=soak steps=<n> nonfinite=<k> resets=<r> by_cause=<cause:count,...>``.
 """
 
@@ -21,7 +22,6 @@ import torch
 
 from cat.envs.config import EnvCfg, PushCfg
 from cat.envs.mdp import rewards as rew_terms
-from cat.envs.mdp import terminations as term_terms
 from cat.envs.scene_set import SceneSet
 from cat.envs.traversal_env import TraversalEnv
 from cat.fields import FieldCfg, Grid, SceneFields, StaleFieldError, build_fields
@@ -55,30 +55,26 @@ def soak_scenes(data: Path) -> tuple[list[Scene], list[Path]]:
 
 
 class _Recorder:
-    """Wraps term functions of a module for the run: last termination flags, non-finite reward counts."""
+    """Wraps reward term functions of a module for the run and counts their non-finite values."""
 
-    def __init__(self, module, names: list[str], kind: str):
-        self.module, self.kind = module, kind
+    def __init__(self, module, names: list[str]):
+        self.module = module
         self.saved = {n: getattr(module, n) for n in names}
-        self.last: dict[str, torch.Tensor] = {}
         self.nonfinite = 0
 
     def __enter__(self) -> _Recorder:
         for name, fn in self.saved.items():
-            setattr(self.module, name, self._wrap(name, fn))
+            setattr(self.module, name, self._wrap(fn))
         return self
 
     def __exit__(self, *exc) -> None:
         for name, fn in self.saved.items():
             setattr(self.module, name, fn)
 
-    def _wrap(self, name, fn):
+    def _wrap(self, fn):
         def wrapped(env):
             value = fn(env)
-            if self.kind == "termination":
-                self.last[name] = value.clone()
-            else:
-                self.nonfinite += int((~torch.isfinite(value)).sum())
+            self.nonfinite += int((~torch.isfinite(value)).sum())
             return value
 
         return wrapped
@@ -90,6 +86,8 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--envs", type=int, default=256)
     p.add_argument("--data", default="/tmp/cat_soak_bench")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--sim", choices=("mujoco", "warp"), default="mujoco")
+    p.add_argument("--per-world", action="store_true", help="each world holds only its own scene's obstacles")
     args = p.parse_args(argv)
     if not args.steps.startswith("steps="):
         raise SystemExit(f"expected steps=<n>, got {args.steps!r}")
@@ -100,18 +98,16 @@ def main(argv: list[str] | None = None) -> None:
     wp.config.log_level = wp.LOG_WARNING  # keep stdout to result lines
 
     scenes, folders = soak_scenes(Path(args.data))
-    sset = SceneSet(scenes, lambda i: SceneFields.load(Scene.fields_dir(folders[i]) / STORE_FILE), args.envs)
+    load = lambda i: SceneFields.load(Scene.fields_dir(folders[i]) / STORE_FILE)  # noqa: E731
+    sset = SceneSet(scenes, load, args.envs, per_world=args.per_world)
     cfg = EnvCfg(num_envs=args.envs, push=PushCfg(enabled=True))
-    env = TraversalEnv(cfg, sim="mujoco", scenes=sset, seed=args.seed)
+    env = TraversalEnv(cfg, sim=args.sim, scenes=sset, seed=args.seed)
     gen = torch.Generator().manual_seed(args.seed)
     causes: Counter = Counter()
     nonfinite_obs, resets, steps = 0, 0, 0
     rew_names = list(env.reward_names)
     t0 = time.perf_counter()
-    with (
-        _Recorder(term_terms, list(cfg.terminations.terms), "termination") as term,
-        _Recorder(rew_terms, rew_names, "reward") as rew,
-    ):
+    with _Recorder(rew_terms, rew_names) as rew:
         while steps < total:
             obs, reward, done, extras = env.step(2 * torch.rand(args.envs, env.num_actions, generator=gen) - 1)
             steps += args.envs
@@ -120,12 +116,13 @@ def main(argv: list[str] | None = None) -> None:
             ids = done.nonzero().flatten()
             resets += len(ids)
             for i in ids.tolist():
-                named = [n for n, flags in term.last.items() if bool(flags[i])]
+                named = [n for n, flags in env.termination_flags.items() if bool(flags[i])]
                 causes.update(named or ["time_out"])
     by_cause = ",".join(f"{k}:{v}" for k, v in sorted(causes.items()))
     print(
         f"case=soak steps={steps} nonfinite={nonfinite_obs + rew.nonfinite} resets={resets} by_cause={by_cause}"
-        f" envs={args.envs} seconds={time.perf_counter() - t0:.0f}",
+        f" envs={args.envs} sim={args.sim} layout={'per_world' if args.per_world else 'tiles'}"
+        f" seconds={time.perf_counter() - t0:.0f}",
         flush=True,
     )
     if nonfinite_obs + rew.nonfinite:

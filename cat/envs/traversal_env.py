@@ -136,6 +136,8 @@ class TraversalEnv(VecEnv):
         self.targets = self.default_joint_pos.clone()
         self.actions = torch.zeros(n, self.num_actions, **f32)
         self.prev_actions = torch.zeros_like(self.actions)
+        # this step's flag of each termination term, kept until the next step (resets do not clear it)
+        self.termination_flags: dict[str, torch.Tensor] = {}
         self.goals = torch.zeros(n, 3, **f32)
         self.phase = torch.zeros(n, **f32)
         self.gait_freq = torch.ones(n, **f32)
@@ -294,8 +296,9 @@ class TraversalEnv(VecEnv):
 
         # terminations
         self.failed = torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
-        for name in cfg.terminations.terms:
-            self.failed |= getattr(term_terms, name)(self)
+        self.termination_flags = {name: getattr(term_terms, name)(self) for name in cfg.terminations.terms}
+        for flags in self.termination_flags.values():
+            self.failed |= flags
         time_outs = self.episode_length_buf >= self.max_episode_length
         dones = self.failed | time_outs
 
@@ -354,6 +357,9 @@ class TraversalEnv(VecEnv):
         out["Metrics/distance_error"] = tr.distance_error(ids).mean()
         out["Metrics/collision_rate"] = tr.collided[ids].float().mean()
         out["Metrics/fall_rate"] = tr.fell[ids].float().mean()
+        for name, flags in self.termination_flags.items():  # the causes, as fractions of the ended episodes
+            out[f"Episode_Termination/{name}"] = flags[ids].float().mean()
+        out["Episode_Termination/time_out"] = (self.episode_length_buf[ids] >= self.max_episode_length).float().mean()
         return out
 
     @property

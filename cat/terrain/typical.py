@@ -15,13 +15,15 @@ Arrows read easy → hard (d = 0 → 1). Positions, gaps and small per-variant j
 sizes grow monotonically with d for a fixed seed, so the free-volume fraction falls with d.
 
 Negative difficulties (d ∈ [−1, 0)) interpolate from trivially easy values to the paper's easiest at d = 0, one
-skill after the other: bars rise from ``BAR_TOP_WARMUP`` (2 cm) to 8 cm over d ∈ [−1, −0.5] under a ceiling out
-of reach, then ceilings come down from ``CLEAR_CEILING`` (above a walking G1) to 1.15 m over [−0.5, 0]; slit gaps
-narrow from 1.3 m and corridors from 1.8 m over [−1, 0]. (Bars first: a policy that learned to crouch before
-meeting its first bar kept its crouched, foot-dragging gait and every bar contact was a foot landing against the
-bar's base; docs/results.md.) They are training-only warm-up scenes (``warmup_variants``) that
-let a difficulty curriculum start where a walking policy already succeeds; the paper's variants and every
-evaluation use d ∈ [0, 1].
+skill after the other: bars rise from ``BAR_TOP_WARMUP`` (2 cm) to 8 cm and widen from 4 cm to the paper's 16 cm
+at the floor over d ∈ [−1, −0.5] (over all of [−1, 0] in types without a ceiling) under a ceiling out of reach,
+then ceilings come down from ``CLEAR_CEILING`` (above a walking G1) to 1.15 m over [−0.5, 0]; slit gaps narrow
+from 1.3 m and corridors from 1.8 m over [−1, 0]. (Bars first: a policy that learned to crouch before meeting its
+first bar kept its crouched, foot-dragging gait and every bar contact was a foot landing against the bar's base;
+docs/results.md. A 4 cm strip fits between a walking gait's footprints by chance, a 16 cm one only when steps are
+placed for it, so the width gives the curriculum its first successes.) They are training-only warm-up scenes
+(``warmup_variants``) that let a difficulty curriculum start where a walking policy already succeeds; the paper's
+variants and every evaluation use d ∈ [0, 1].
 """
 
 from __future__ import annotations
@@ -61,7 +63,9 @@ HEIGHT = float(BOUNDS[1, 2])
 HALF_W = float(BOUNDS[1, 1])
 CLEAR_CEILING = 1.42  # warm-up ceiling at d = -1: above a walking G1 (head sphere top 1.33 m at home pose) [m]
 BAR_TOP_WARMUP = 0.02  # bar top at d = -1: a bump a walking gait clears, but feet must not land on it [m]
+BAR_RADIUS_WARMUP = 0.02  # bar radius at d = -1: 4 cm wide at the floor, so a walking gait clears it by chance [m]
 BAR_SPAN, CEILING_SPAN = (-1.0, -0.5), (-0.5, 0.0)  # warm-up ranges of d over which bars rise, ceilings drop
+WARMUP = (-1.0, 0.0)  # the whole warm-up range: bars in scenes without a ceiling grow over all of it
 
 
 def lerp(a: float, b: float, t: float) -> float:
@@ -95,8 +99,10 @@ class _Params:
 Element = tuple[float, Callable[[float], list[trimesh.Trimesh]]]
 
 
-def _bar(p: _Params) -> Element:
-    top, r = p(0.08, 0.25, trivial=BAR_TOP_WARMUP, span=BAR_SPAN), p(0.08, 0.15)
+def _bar(p: _Params, span: tuple[float, float] = BAR_SPAN) -> Element:
+    """Hurdle bar; ``span``: the warm-up range of d over which it grows (all of [−1, 0] when no ceiling follows)."""
+    top = p(0.08, 0.25, trivial=BAR_TOP_WARMUP, span=span)
+    r = max(p(0.08, 0.15, trivial=BAR_RADIUS_WARMUP, span=span), top / 2)  # resting on the floor
     return 2 * r, lambda x0: [bar("y", (x0 + r, 0.0, top - r), r, 2 * HALF_W)]
 
 
@@ -160,11 +166,11 @@ def _layout(kind: str, p: _Params) -> list[trimesh.Trimesh]:
     if kind == "side-hurdle-crouch":
         return _sequence([_slit(p), _bar(p), _ceiling(p, (0.25, 0.4))], rng)
     if kind == "side-hurdle":
-        return _sequence([_slit(p), _bar(p)], rng)
+        return _sequence([_slit(p), _bar(p, WARMUP)], rng)
     if kind == "side-crouch":
         return _sequence([_low_door(p)], rng)
     if kind == "hurdle-pass":
-        return _corridor(p) + _sequence([_bar(p)], rng)
+        return _corridor(p) + _sequence([_bar(p, WARMUP)], rng)
     if kind == "crouch-pass":
         return _corridor(p) + _sequence([_ceiling(p, (0.4, 0.9))], rng)
     if kind == "side-pass":
@@ -172,7 +178,7 @@ def _layout(kind: str, p: _Params) -> list[trimesh.Trimesh]:
         return _sequence([_slit(p, yc=off), _slit(p, yc=-off)], rng, min_gap=0.45)
     if kind == "multi-hurdle":
         n = 2 if p.d < 0.5 else 3
-        return _sequence([_bar(p) for _ in range(n)], rng, min_gap=0.3)
+        return _sequence([_bar(p, WARMUP) for _ in range(n)], rng, min_gap=0.3)
     raise SceneError(f"unknown typical scene type {kind!r}; valid: {', '.join(TYPICAL_KINDS)}")
 
 

@@ -11,7 +11,8 @@ episode sampling; its physics worlds hold no obstacles, or with ``--per-world`` 
 
 ``case=scale_physics`` (``--physics-scenes``, a moderate set of the three kinds) compares the two physics
 layouts with obstacles, built and measured in the same run: tiles (every world holds every scene) against
-per-world scene models — env steps/s (and the flat task's), model memory, build time, reset cost per env.
+per-world scene models — env steps/s (and the flat task's), model memory, build time, reset cost per env;
+``--sim warp`` runs both on mujoco_warp (per-world scenes as geom slots, ``cat.envs.sim.warp_slots``).
 ``case=scale_dr`` gives domain randomisation's model memory: per-world pools (scenes x ``--pool`` copies,
 built) against the tiles' per-env copy of the whole tiled model (projected from one copy).
 """
@@ -123,6 +124,7 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--repeat", type=int, default=21)
     p.add_argument("--mem-limit-gb", type=float, default=None, help="refuse a bank above this (default: RAM - 4 GB)")
     p.add_argument("--per-world", action="store_true", help="case=scale with per-world scene models (obstacles)")
+    p.add_argument("--sim", choices=("mujoco", "warp"), default="mujoco", help="physics backend of every env")
     p.add_argument("--physics-scenes", type=int, default=24, help="case=scale_physics set size (0: skip)")
     p.add_argument("--pool", type=int, default=8, help="domain randomisation pool per scene (case=scale_dr)")
     p.add_argument("--only-physics", action="store_true", help="run case=scale_physics / scale_dr only")
@@ -168,8 +170,8 @@ def scale_case(unique: dict[str, list[Path]], args: argparse.Namespace) -> None:
         sset = _FieldsOnly([scenes_u[f] for f in folders], load, args.envs, dtype=args.dtype)
     load_s = time.perf_counter() - t
     q = query_ms(sset.bank, args.query_envs, args.repeat)
-    env = TraversalEnv(EnvCfg(num_envs=args.envs), sim="mujoco", scenes=sset, seed=0)
-    flat = TraversalEnv(EnvCfg(num_envs=args.envs), sim="mujoco", seed=0)
+    env = TraversalEnv(EnvCfg(num_envs=args.envs), sim=args.sim, scenes=sset, seed=0)
+    flat = TraversalEnv(EnvCfg(num_envs=args.envs), sim=args.sim, seed=0)
     rates: dict[str, list[float]] = {"set": [], "flat": []}
     for _ in range(args.rounds):  # interleaved: both see the same machine load
         rates["set"].append(env_rate(env, args.seconds / args.rounds))
@@ -178,7 +180,7 @@ def scale_case(unique: dict[str, list[Path]], args: argparse.Namespace) -> None:
     print(
         f"case=scale scenes={len(folders)} goals={GOALS} bank_mb={sset.bank.nbytes / 2**20:.0f} load_s={load_s:.1f}"
         f" query_ms={q:.2f} env_steps_per_s={rate:.0f} flat_env_steps_per_s={flat_rate:.0f}"
-        f" ratio={rate / flat_rate:.2f} physics={'per_world' if args.per_world else 'none'}",
+        f" ratio={rate / flat_rate:.2f} physics={'per_world' if args.per_world else 'none'} sim={args.sim}",
         flush=True,
     )
 
@@ -196,9 +198,9 @@ def physics_case(unique: dict[str, list[Path]], args: argparse.Namespace) -> Non
     for mode in ("tiles", "per_world"):
         t = time.perf_counter()
         sset = SceneSet(scenes, load, args.envs, dtype=args.dtype, per_world=mode == "per_world")
-        envs[mode] = TraversalEnv(EnvCfg(num_envs=args.envs), sim="mujoco", scenes=sset, seed=0)
+        envs[mode] = TraversalEnv(EnvCfg(num_envs=args.envs), sim=args.sim, scenes=sset, seed=0)
         build_s[mode] = time.perf_counter() - t
-    envs["flat"] = TraversalEnv(EnvCfg(num_envs=args.envs), sim="mujoco", seed=0)
+    envs["flat"] = TraversalEnv(EnvCfg(num_envs=args.envs), sim=args.sim, seed=0)
     rates: dict[str, list[float]] = {m: [] for m in envs}
     for _ in range(args.rounds):  # interleaved: both see the same machine load
         for m, env in envs.items():
@@ -207,8 +209,9 @@ def physics_case(unique: dict[str, list[Path]], args: argparse.Namespace) -> Non
     reset = {m: reset_us(env) for m, env in envs.items() if m != "flat"}
     tiles, wm = envs["tiles"], envs["per_world"].world_models
     tile_mb, scene_mb = tiles.sim.model.nbuffer / 2**20, wm.nbytes / 2**20
+    layouts = getattr(envs["per_world"].sim, "num_layouts", 1)  # MjData layout classes (MuJoCo C)
     print(
-        f"case=scale_physics scenes={len(scenes)} envs={args.envs} layouts={envs['per_world'].sim.num_layouts}"
+        f"case=scale_physics sim={args.sim} scenes={len(scenes)} envs={args.envs} layouts={layouts}"
         f" tiles_env_steps_per_s={rate['tiles']:.0f} per_world_env_steps_per_s={rate['per_world']:.0f}"
         f" ratio={rate['per_world'] / rate['tiles']:.2f} flat_env_steps_per_s={rate['flat']:.0f}"
         f" tile_model_mb={tile_mb:.1f} per_world_models_mb={scene_mb:.1f}"

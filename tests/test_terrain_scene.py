@@ -123,6 +123,31 @@ def test_check_scene_rejects_blocked_goal():
         check_scene(inside)
 
 
+def test_parts_thinner_than_the_grid_are_reported(caplog):
+    """A 1 cm floor strip holds no voxel centre of the 4 cm grid (centres at 2, 6, ... cm): the scene reports it
+    and check_scene warns; a 6 cm strip is seen."""
+    thin = box((0.9, -1.0, 0.0), (1.1, 1.0, 0.01))
+    scene = Scene(
+        mesh=combine([thin]),
+        bounds=np.array([[-0.5, -1.0, 0.0], [2.5, 1.0, 1.5]]),
+        start=np.array([0.0, 0.0, GOAL_HEIGHT]),
+        goals=np.array([[2.0, 0.0, GOAL_HEIGHT]]),
+    )
+    (bounds,) = scene.unseen_parts()
+    np.testing.assert_allclose(bounds, [[0.9, -1.0, 0.0], [1.1, 1.0, 0.01]], atol=1e-9)
+    assert not scene.occupancy().any()
+    with caplog.at_level("WARNING"):
+        check_scene(scene)
+    assert "hold no voxel centre" in caplog.text
+    thick = Scene(
+        mesh=combine([box((0.9, -1.0, 0.0), (1.1, 1.0, 0.06))]),
+        bounds=scene.bounds,
+        start=scene.start,
+        goals=scene.goals,
+    )
+    assert thick.unseen_parts() == [] and thick.occupancy().any()
+
+
 def test_reachability_model():
     """A humanoid steps over low bars and crouches under 1 m ceilings, but not under a table."""
     grid = GridSpec.from_bounds(np.array([[-0.5, -1, 0], [2.5, 1, 1.5]]))

@@ -52,6 +52,7 @@ class Scene:
     start_region: np.ndarray | None = None
     meta: dict = field(default_factory=dict)
     _occ: dict = field(default_factory=dict, repr=False, compare=False)
+    _unseen: dict = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         self.bounds = np.asarray(self.bounds, dtype=np.float64).reshape(2, 3)
@@ -75,8 +76,17 @@ class Scene:
     def occupancy(self, voxel: float = VOXEL) -> np.ndarray:
         """Boolean occupancy on ``grid(voxel)`` (cached)."""
         if voxel not in self._occ:
-            self._occ[voxel] = occupancy(self.mesh, self.grid(voxel))
+            self._unseen[voxel] = []
+            self._occ[voxel] = occupancy(self.mesh, self.grid(voxel), self._unseen[voxel])
         return self._occ[voxel]
+
+    def unseen_parts(self, voxel: float = VOXEL) -> list[np.ndarray]:
+        """Bounds (2, 3) of the obstacle parts that hold no voxel centre of ``grid(voxel)``: the physics collides
+        with them but the occupancy, the fields and the maps miss them (``cat.terrain.voxel.occupancy``)."""
+        if voxel not in self._unseen:
+            self._unseen[voxel] = []
+            occupancy(self.mesh, self.grid(voxel), self._unseen[voxel])
+        return self._unseen[voxel]
 
     def reachable_goals(self, cfg: ReachCfg | None = None, voxel: float = VOXEL) -> np.ndarray:
         """Boolean per goal: reachable from the start by a humanoid (see ``cat.terrain.voxel``)."""
@@ -256,7 +266,17 @@ def load_mesh(path: str | os.PathLike, allow_empty: bool = False) -> trimesh.Tri
 
 
 def check_scene(scene: Scene, min_clearance: float = 0.05, cfg: ReachCfg | None = None) -> None:
-    """Raise ``SceneError`` unless start and goals are in free space and every goal is reachable."""
+    """Raise ``SceneError`` unless start and goals are in free space and every goal is reachable; warn about
+    obstacle parts too thin for the field grid (invisible to the policy, solid to the physics)."""
+    unseen = scene.unseen_parts()
+    if unseen:
+        log.warning(
+            "%d obstacle part(s) hold no voxel centre of the %.2f m field grid: the fields and maps miss them but "
+            "the physics collides with them (make them at least a voxel thick); bounds: %s",
+            len(unseen),
+            VOXEL,
+            [b.round(3).tolist() for b in unseen[:5]],
+        )
     pts = np.vstack([scene.start[None], scene.goals])
     lo, hi = scene.bounds
     outside = np.any((pts < lo) | (pts > hi), axis=1)

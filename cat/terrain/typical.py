@@ -15,12 +15,12 @@ Arrows read easy → hard (d = 0 → 1). Positions, gaps and small per-variant j
 sizes grow monotonically with d for a fixed seed, so the free-volume fraction falls with d.
 
 Negative difficulties (d ∈ [−1, 0)) interpolate from trivially easy values to the paper's easiest at d = 0, one
-skill after the other: bars rise from ``BAR_TOP_WARMUP`` (2 cm) to 8 cm and widen from 4 cm to the paper's 16 cm
-at the floor over d ∈ [−1, −0.5] (over all of [−1, 0] in types without a ceiling) under a ceiling out of reach,
-then ceilings come down from ``CLEAR_CEILING`` (above a walking G1) to 1.15 m over [−0.5, 0]; slit gaps narrow
-from 1.3 m and corridors from 1.8 m over [−1, 0]. (Bars first: a policy that learned to crouch before meeting its
-first bar kept its crouched, foot-dragging gait and every bar contact was a foot landing against the bar's base;
-docs/results.md. A 4 cm strip fits between a walking gait's footprints by chance, a 16 cm one only when steps are
+skill after the other: bars rise from ``BAR_TOP_WARMUP`` (4.5 cm) to 8 cm and widen from 5 cm to the paper's
+16 cm over d ∈ [−1, −0.5] (over all of [−1, 0] in types without a ceiling) under a ceiling out of reach, then
+ceilings come down from ``CLEAR_CEILING`` (above a walking G1) to 1.15 m over [−0.5, 0]; slit gaps narrow from
+1.3 m and corridors from 1.8 m over [−1, 0]. (Bars first: a policy that learned to crouch before meeting its first
+bar kept its crouched, foot-dragging gait and every bar contact was a foot landing against the bar's base;
+docs/results.md. A 5 cm strip fits between a walking gait's footprints by chance, a 16 cm one only when steps are
 placed for it, so the width gives the curriculum its first successes.) They are training-only warm-up scenes
 (``warmup_variants``) that let a difficulty curriculum start where a walking policy already succeeds; the paper's
 variants and every evaluation use d ∈ [0, 1].
@@ -62,8 +62,11 @@ WALL_T = 0.12
 HEIGHT = float(BOUNDS[1, 2])
 HALF_W = float(BOUNDS[1, 1])
 CLEAR_CEILING = 1.42  # warm-up ceiling at d = -1: above a walking G1 (head sphere top 1.33 m at home pose) [m]
-BAR_TOP_WARMUP = 0.02  # bar top at d = -1: a bump a walking gait clears, but feet must not land on it [m]
-BAR_RADIUS_WARMUP = 0.02  # bar radius at d = -1: 4 cm wide at the floor, so a walking gait clears it by chance [m]
+# The easiest warm-up bar: the lowest, narrowest bar the 4 cm field grid still sees (occupancy tests voxel centres,
+# the lowest at z = 2 cm: a bar must be about 5 cm wide there; a 2 cm bar was invisible to the field and to the
+# elevation map, so no policy could learn to avoid it). A walking gait can clear it; feet must not land on it.
+BAR_TOP_WARMUP = 0.045  # [m]
+BAR_RADIUS_WARMUP = 0.025  # 5 cm wide at 2 cm height, 3 cm at the floor [m]
 BAR_SPAN, CEILING_SPAN = (-1.0, -0.5), (-0.5, 0.0)  # warm-up ranges of d over which bars rise, ceilings drop
 WARMUP = (-1.0, 0.0)  # the whole warm-up range: bars in scenes without a ceiling grow over all of it
 

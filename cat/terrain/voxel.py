@@ -67,12 +67,15 @@ class GridSpec:
 
 
 # ----------------------------------------------------------------------------------------- occupancy
-def occupancy(mesh: trimesh.Trimesh, grid: GridSpec) -> np.ndarray:
+def occupancy(mesh: trimesh.Trimesh, grid: GridSpec, unseen: list[np.ndarray] | None = None) -> np.ndarray:
     """Boolean occupancy of ``grid`` (voxel centre inside any mesh component).
 
     Each connected component is handled on its own bounding box: convex ones by half-space tests,
     closed non-convex ones by ray-parity ``contains``, open surfaces by marking the voxels they cross and
     filling enclosed holes. Overlapping components are therefore a union (a winding number > 0.5).
+    ``unseen`` (a list) receives the bounds of components inside the grid that hold no voxel centre: thinner
+    than the grid resolves, they are missing from the occupancy and everything built on it (fields, maps) while
+    the physics still collides with them. (A thin feature of a larger component is not detected.)
     """
     occ = np.zeros(grid.shape, dtype=bool)
     if len(mesh.faces) == 0:
@@ -92,6 +95,8 @@ def occupancy(mesh: trimesh.Trimesh, grid: GridSpec) -> np.ndarray:
             occ[sl] |= inside
             continue
         occ[sl] |= inside.reshape(pts.shape[:3])
+        if unseen is not None and not inside.any():
+            unseen.append(comp.bounds.copy())
     return occ
 
 

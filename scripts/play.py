@@ -1,7 +1,8 @@
 """Evaluate a checkpoint on the trial protocol: ``python scripts/play.py checkpoint=<model.pt> episodes=20``.
 
 Optional: ``record=rollout.rrd`` (rerun replay of world 0), ``seed=`` (start poses), ``scene_seed=`` /
-``scene_dir=`` (other scenes than the run's), ``sim=``, ``num_envs=``. Prints one line:
+``scene_dir=`` (other scenes than the run's), ``mirror=true`` (their left/right mirror images), ``sim=``,
+``num_envs=``. Prints one line:
 ``episodes=<n> success_rate=<x> distance_error=<m> collision_rate=<x> fall_rate=<x>``.
 """
 

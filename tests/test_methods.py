@@ -142,6 +142,12 @@ def test_each_method_trains_loads_and_plays(method_runs, method):
         resume_config(ckpt, ["method=other"])
 
 
+def test_play_on_the_mirror_images(method_runs):
+    """play.py mirror=true evaluates the same trials on the left/right mirrored scenes."""
+    summary = play(PlayCfg(checkpoint=str(method_runs["ours"]), episodes=2, time_s=0.5, mirror=True))
+    assert summary.trials == 2 and 0.0 <= summary.distance_error < 3.0
+
+
 def test_manifest_rejects_a_row_mixing_observation_layouts(method_runs, tmp_path):
     ok = {"methods": {"A": [str(method_runs["ours"]), str(method_runs["wo_r_field"])]}, "table1": {}}
     (tmp_path / "ok.yaml").write_text(yaml.safe_dump(ok))

@@ -148,6 +148,29 @@ def test_parts_thinner_than_the_grid_are_reported(caplog):
     assert thick.unseen_parts() == [] and thick.occupancy().any()
 
 
+def test_mirrored_scene_is_the_reflection():
+    """Scene.mirrored reflects y: the occupancy is the flipped occupancy (the typical grid is symmetric about
+    y = 0), the mesh stays closed with the same volume, start region / start / goals follow, and twice is the
+    original."""
+    from cat.terrain import typical_variants
+
+    scene = typical_variants("side-pass", 10, seed=0)[4]
+    m = scene.mirrored()
+    assert m.mesh.is_watertight and m.mesh.volume == pytest.approx(scene.mesh.volume)
+    np.testing.assert_array_equal(m.occupancy(), scene.occupancy()[:, ::-1])
+    np.testing.assert_allclose(m.bounds, scene.bounds)  # symmetric bounds stay put
+    np.testing.assert_allclose(m.goals, scene.goals * [1, -1, 1])
+    np.testing.assert_allclose(m.start_region, [[-0.3, -0.3], [0.1, 0.3]])
+    check_scene(m)
+    back = m.mirrored()
+    np.testing.assert_allclose(back.mesh.vertices, scene.mesh.vertices)
+    assert back.meta.get("mirrored") is False and m.meta["mirrored"] is True
+    lopsided = Scene(mesh=scene.mesh, bounds=[[-0.5, -1.0, 0], [2.5, 1.5, 1.5]], start=[0, 0.2], goals=[[2, 0.4]])
+    lm = lopsided.mirrored()
+    np.testing.assert_allclose(lm.bounds, [[-0.5, -1.5, 0], [2.5, 1.0, 1.5]])
+    np.testing.assert_allclose(lm.start_region, [[-0.1, -0.3], [0.1, -0.1]])
+
+
 def test_reachability_model():
     """A humanoid steps over low bars and crouches under 1 m ceilings, but not under a table."""
     grid = GridSpec.from_bounds(np.array([[-0.5, -1, 0], [2.5, 1, 1.5]]))

@@ -81,6 +81,12 @@ class SceneGroup:
         names = [str(f.relative_to(root)) for f in folders]
         return cls(name, scenes, names, [scene_fields(s, f, None) for s, f in zip(scenes, folders, strict=True)])
 
+    def mirrored(self) -> SceneGroup:
+        """The group's scenes reflected left/right (``Scene.mirrored``), their fields built anew."""
+        scenes = [s.mirrored() for s in self.scenes]
+        names = [f"{n}_mirrored" for n in self.scene_names]
+        return SceneGroup(f"{self.name}_mirrored", scenes, names, [scene_fields(s, None, None) for s in scenes])
+
     def scene_set(self, num_envs: int, device: str, per_world: bool = False) -> SceneSet:
         return SceneSet(self.scenes, self.fields, num_envs, device, per_world=per_world)
 

@@ -32,6 +32,7 @@ class PlayCfg:
     scene_seed: int | None = None  # typical scenes: override the run's task.scene_seed
     scene_dir: str = ""  # evaluate on these scene folders instead of the run's scenes
     scene_kind: str = ""  # evaluate on this typical kind's variants (a generalist: one of its task.scene_groups)
+    mirror: bool = False  # evaluate on the left/right mirror images of the scenes (a lateralised policy shows)
     time_s: float = 5.0  # trial length (paper: 5 s); e.g. 20 to measure falls over a whole flat episode
     record: str = ""  # .rrd path: record world 0 of the rollout for rerun replay (`rerun <file>`)
 
@@ -44,6 +45,10 @@ def play(cfg: PlayCfg) -> Summary:
     if cfg.episodes < 1:
         raise ValueError(f"episodes must be >= 1, got {cfg.episodes}")
     group = run_scene_group(task, cfg.scene_seed, cfg.scene_dir, cfg.scene_kind)
+    if cfg.mirror:
+        if group is None:
+            raise ValueError("mirror=true needs obstacle scenes; this run trained on flat ground")
+        group = group.mirrored()
     if cfg.time_s <= 0:
         raise ValueError(f"time_s must be > 0, got {cfg.time_s}")
     if cfg.num_envs is not None and cfg.num_envs < 1:

@@ -68,6 +68,28 @@ class Scene:
         if not np.all(self.bounds[1] > self.bounds[0]):
             raise SceneError(f"bounds must have max > min, got {self.bounds.tolist()}")
 
+    def mirrored(self) -> Scene:
+        """The scene reflected left/right (y -> -y): mesh, bounds, start region, start and goals.
+
+        A policy that learned one handedness (e.g. a side pass always opening to the left first) scores very
+        differently on the mirror image of its scenes; ``play.py mirror=true`` evaluates it there."""
+        flip = np.array([1.0, -1.0, 1.0])
+        mesh = self.mesh.copy()
+        mesh.apply_transform(np.diag([1.0, -1.0, 1.0, 1.0]))  # trimesh re-winds faces of a reflection
+        lo, hi = self.bounds * flip
+        region = self.start_region * flip[:2]
+        return Scene(
+            mesh=mesh,
+            bounds=np.array([np.minimum(lo, hi), np.maximum(lo, hi)]),
+            start=self.start * flip,
+            goals=self.goals * flip,
+            kind=self.kind,
+            difficulty=self.difficulty,
+            seed=self.seed,
+            start_region=np.array([np.minimum(*region), np.maximum(*region)]),
+            meta={**self.meta, "mirrored": not self.meta.get("mirrored", False)},
+        )
+
     # ------------------------------------------------------------------------------------ grids
     def grid(self, voxel: float = VOXEL) -> GridSpec:
         """Voxel grid over the scene bounds (centres at origin + (i+½)·voxel)."""

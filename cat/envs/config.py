@@ -244,6 +244,10 @@ class EnvCfg:
     # [-1, 0): lower bars, higher ceilings, wider gaps; cat.terrain.typical.warmup_variants), so the difficulty
     # curriculum starts where the walking prior succeeds. Never evaluated (cat.eval builds the paper's variants).
     warmup_variants: int = 0
+    # training aid: add the left/right mirror image of every scene (cat.terrain.Scene.mirrored), so a scene set
+    # that is not balanced (eight of the paper's ten side-pass variants open to the left first) cannot teach one
+    # handedness only. Real experience on both sides, unlike PPO's symmetry augmentation. Never evaluated.
+    mirror_scenes: bool = False
     action_clip: float = 1.0
     gait_freq: tuple[float, float] = (1.3, 1.5)  # gait clock frequency [Hz]
     command: CommandCfg = field(default_factory=CommandCfg)

@@ -129,11 +129,13 @@ class SceneSet:
         dtype: str = "float32",
         on_stale: str = "rebuild",
         per_world: bool = False,
+        mirror: bool = False,
     ) -> SceneSet:
         """Every scene folder (with ``scene.json``) under ``path``, optionally only those of ``kind``; grid
         shapes may differ. Fields are read (or built) one scene at a time while the bank fills; saved fields
         that do not match ``field_cfg`` (or the scene) are rebuilt (``on_stale="rebuild"``) or refused
-        (``"error"``: raises :class:`cat.fields.StaleFieldError`)."""
+        (``"error"``: raises :class:`cat.fields.StaleFieldError`). ``mirror`` adds each scene's mirror image
+        (its fields built anew)."""
         if on_stale not in ("rebuild", "error"):
             raise SceneSetError(f"on_stale must be 'rebuild' or 'error', got {on_stale!r}")
         root = Path(path)
@@ -146,6 +148,8 @@ class SceneSet:
             kinds = sorted({s.kind for s in scenes})
             raise SceneSetError(f"no scenes{' of kind ' + repr(kind) if kind else ''} under {root}; found: {kinds}")
         scenes, folders = [scenes[i] for i in keep], [folders[i] for i in keep]
+        if mirror:
+            scenes, folders = with_mirrors(scenes), [x for f in folders for x in (f, None)]
         bar = tqdm(total=len(scenes), desc="fields")
 
         def load(i: int) -> SceneFields | list[Field]:
@@ -168,11 +172,14 @@ class SceneSet:
         field_cfg: FieldCfg | None = None,
         per_world: bool = False,
         warmup: int = 0,
+        mirror: bool = False,
     ) -> SceneSet:
         """The paper's typical scenes of ``kind`` (or of each of several kinds: one scene group per kind)
-        built on the fly (no dataset needed), plus ``warmup`` training-only easier scenes per kind."""
+        built on the fly (no dataset needed), plus ``warmup`` training-only easier scenes per kind, and with
+        ``mirror`` the mirror image of each."""
         kinds = [kind] if isinstance(kind, str) else list(kind)
         scenes = [s for k in kinds for s in warmup_variants(k, warmup, seed) + typical_variants(k, variants, seed)]
+        scenes = with_mirrors(scenes) if mirror else scenes
         return cls(scenes, lambda i: scene_fields(scenes[i], None, field_cfg), num_envs, device, per_world=per_world)
 
     # --- env hooks ----------------------------------------------------------------------------------------
@@ -241,6 +248,11 @@ class SceneSet:
     def mesh_for_env(self, env_id: int):
         s_idx = int(self.scene_of_env[env_id])
         return self.scenes[s_idx].mesh.copy().apply_translation(self.offsets[s_idx])
+
+
+def with_mirrors(scenes: list[Scene]) -> list[Scene]:
+    """Each scene followed by its left/right mirror image (``Scene.mirrored``)."""
+    return [m for s in scenes for m in (s, s.mirrored())]
 
 
 def scene_fields(

@@ -83,7 +83,12 @@ def make_env(cfg: TrainCfg, num_envs: int | None = None) -> TraversalEnv:
     if task.scene_dir or task.scene_kind or task.scene_groups:
         from cat.envs.scene_set import SceneSet
 
-        kw = dict(device=cfg.sim.device, per_world=cfg.sim.per_world_scenes, warmup=task.warmup_variants)
+        kw = dict(
+            device=cfg.sim.device,
+            per_world=cfg.sim.per_world_scenes,
+            warmup=task.warmup_variants,
+            mirror=task.mirror_scenes,
+        )
         if task.scene_groups and not task.scene_dir:
             scenes = SceneSet.typical(task.scene_groups, n, task.scene_variants, task.scene_seed, **kw)
         elif task.scene_dir:

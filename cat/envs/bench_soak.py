@@ -98,7 +98,10 @@ def main(argv: list[str] | None = None) -> None:
     wp.config.log_level = wp.LOG_WARNING  # keep stdout to result lines
 
     scenes, folders = soak_scenes(Path(args.data))
-    load = lambda i: SceneFields.load(Scene.fields_dir(folders[i]) / STORE_FILE)  # noqa: E731
+
+    def load(i: int) -> SceneFields:
+        return SceneFields.load(Scene.fields_dir(folders[i]) / STORE_FILE)
+
     sset = SceneSet(scenes, load, args.envs, per_world=args.per_world)
     cfg = EnvCfg(num_envs=args.envs, push=PushCfg(enabled=True))
     env = TraversalEnv(cfg, sim=args.sim, scenes=sset, seed=args.seed)

@@ -106,8 +106,8 @@ class Scene:
         """Bounds (2, 3) of the obstacle parts that hold no voxel centre of ``grid(voxel)``: the physics collides
         with them but the occupancy, the fields and the maps miss them (``cat.terrain.voxel.occupancy``)."""
         if voxel not in self._unseen:
-            self._unseen[voxel] = []
-            occupancy(self.mesh, self.grid(voxel), self._unseen[voxel])
+            self._occ.pop(voxel, None)  # an occupancy read from a file did not look at the parts: compute both once
+            self.occupancy(voxel)
         return self._unseen[voxel]
 
     def reachable_goals(self, cfg: ReachCfg | None = None, voxel: float = VOXEL) -> np.ndarray:

@@ -1,16 +1,30 @@
-"""Ghost obstacles (``task.ghost_obstacles``): contacts are detected and counted, but exert no force; evaluation
-always meets physical obstacles."""
+"""Ghost obstacles (``task.ghost_obstacles``) and ghost feet (``task.ghost_feet``): contacts are detected and
+counted, but exert no force (for the feet only: the rest of the body meets physical obstacles); evaluation always
+meets physical obstacles."""
 
 from __future__ import annotations
 
 import mujoco
 import numpy as np
 
-from cat.envs.config import EnvCfg
+import torch
+
+from cat.envs.config import DomainRandCfg, EnvCfg
+from cat.envs.mdp.terminations import collided
 from cat.envs.robot import OBSTACLE_BODY, load_robot_cfg
-from cat.envs.scene import COLLISION_SENSOR, build_env_model, make_obstacles_ghost
+from cat.envs.scene import (
+    COLLISION_SENSOR,
+    build_env_model,
+    foot_contact_sensor,
+    foot_obstacle_sensor,
+    make_feet_ghost,
+    make_obstacles_ghost,
+)
+from cat.envs.scene_set import SceneSet
+from cat.envs.traversal_env import TraversalEnv
 from cat.eval.runner import EvalCfg, eval_task
 from cat.terrain import typical_variants
+from cat.terrain.typical import warmup_variants
 from cat.terrain.mujoco_export import add_obstacles_to_spec
 
 
@@ -61,3 +75,87 @@ def test_ghost_contacts_are_counted_but_exert_no_force():
 def test_evaluation_is_always_physical():
     task = EnvCfg(ghost_obstacles=True)
     assert eval_task(task, 4, EvalCfg()).ghost_obstacles is False
+
+
+def _feet_in_the_warmup_bar(ghost_feet: bool):
+    """The G1 standing with both feet inside the easiest hurdle-pass warm-up bar (4.5 cm high)."""
+    robot = load_robot_cfg()
+    scene = warmup_variants("hurdle-pass", 1, 0)[0]
+    model = build_env_model(robot, lambda spec: add_obstacles_to_spec(spec, scene))
+    if ghost_feet:
+        assert make_feet_ghost(model, robot) == 8  # a box and three capsules per foot
+    data = mujoco.MjData(model)
+    bar = min(scene.mesh.split(only_watertight=False), key=lambda p: p.bounds[1, 2]).bounds
+    data.qpos[0] = 0.5 * (bar[0, 0] + bar[1, 0]) - 0.04  # the foot centre (4 cm ahead of the ankle) on the bar
+    data.qpos[2] = 0.79
+    mujoco.mj_forward(model, data)
+    return robot, model, data
+
+
+def test_ghost_feet_pass_through_the_bar_and_stand_on_the_floor():
+    for ghost in (False, True):
+        robot, model, data = _feet_in_the_warmup_bar(ghost)
+        sensor = {n: data.sensordata[model.sensor_adr[model.sensor(n).id]] for n in (COLLISION_SENSOR,)}
+        feet = [data.sensordata[model.sensor_adr[model.sensor(foot_obstacle_sensor(f)).id]] for f in robot.feet]
+        assert min(feet) > 0 and sensor[COLLISION_SENSOR] == sum(feet)  # both feet, nothing else, touch
+        weight = 9.81 * model.body_subtreemass[model.body(robot.root_body).id]
+        normal = 0.0
+        for _ in range(100):  # 0.2 s
+            mujoco.mj_step(model, data)
+            normal = max(normal, _obstacle_normal_force(model, data)[1])
+        floor = [data.sensordata[model.sensor_adr[model.sensor(foot_contact_sensor(f)).id]] for f in robot.feet]
+        if ghost:
+            assert normal < 1e-3 * weight  # the bar does not push the feet
+            assert min(floor) > 0 and data.qpos[2] > 0.75  # both feet still stand on the floor
+        else:
+            assert normal > 0.5 * weight  # the bar shoves the feet out
+
+
+def test_ghost_feet_leave_the_rest_of_the_body_physical():
+    """Feet and shins inside the paper's first hurdle-crouch bar: only the feet's contacts go soft."""
+    robot = load_robot_cfg()
+    scene = typical_variants("hurdle-crouch", 1, 0)[0]
+    model = build_env_model(robot, lambda spec: add_obstacles_to_spec(spec, scene))
+    make_feet_ghost(model, robot)
+    data = mujoco.MjData(model)
+    bar = scene.mesh.split(only_watertight=False)[0].bounds
+    data.qpos[0] = 0.5 * (bar[0, 0] + bar[1, 0])
+    data.qpos[2] = 0.78
+    mujoco.mj_forward(model, data)
+    mujoco.mj_step(model, data)
+    feet = {model.body(f).id for f in robot.feet}
+    body = model.body(OBSTACLE_BODY).id
+    force, by_part = np.zeros(6), {"foot": [], "other": []}
+    for k, c in enumerate(data.contact[: data.ncon]):
+        parts = {model.geom_bodyid[c.geom1], model.geom_bodyid[c.geom2]}
+        if body in parts:
+            mujoco.mj_contactForce(model, data, k, force)
+            by_part["foot" if parts & feet else "other"].append(abs(force[0]))
+    assert by_part["foot"] and by_part["other"]
+    assert max(by_part["foot"]) < 1.0 and max(by_part["other"]) > 10.0
+
+
+def test_env_ghost_feet_are_a_collision_that_does_not_end_the_episode():
+    scenes = SceneSet.typical("hurdle-pass", 2, variants=1, warmup=1, per_world=True)
+    cfg = EnvCfg(num_envs=2, ghost_feet=True, domain_rand=DomainRandCfg(enabled=False))
+    cfg.terminations.on_collision = True
+    env = TraversalEnv(cfg, scenes=scenes, seed=0)
+    assert env.scenes.scene_of_env[0] == 0 and env.scenes.scenes[0].difficulty == -1.0  # the 4.5 cm bar
+    qpos, qvel = env.sim.qpos[:1].clone(), env.sim.qvel[:1].clone()
+    qpos[0, :3] = torch.tensor([0.47 - 0.04, 0.0, 0.79], dtype=qpos.dtype)
+    qpos[0, 3:7] = torch.tensor([1.0, 0.0, 0.0, 0.0], dtype=qpos.dtype)
+    env.sim.reset(torch.tensor([0]), qpos, qvel)
+    env._update_state()
+    s = env.state
+    assert s.collision[0] and s.foot_collision[0].all() and not s.hard_collision[0]
+    assert not collided(env)[0]
+    env.cfg.ghost_feet = False  # the same contacts read without the aid: they would end the episode
+    env._update_state()
+    assert env.state.hard_collision[0] and collided(env)[0]
+    env.cfg.ghost_feet = True
+    _, _, dones, _ = env.step(torch.zeros(2, 12))
+    assert not dones[0] and env.trial.collided[0]  # counted against success, the episode goes on
+
+
+def test_evaluation_is_physical_for_ghost_feet_too():
+    assert eval_task(EnvCfg(ghost_feet=True), 4, EvalCfg()).ghost_feet is False

@@ -210,7 +210,7 @@ class TerminationCfg:
     terms: list[str] = field(default_factory=lambda: ["fallen", "collided", "non_finite", "left_field_grid"])
     min_base_height: float = 0.35  # [m]
     max_tilt: float = 1.0  # [rad] angle between the pelvis z axis and the vertical
-    on_collision: bool = False  # end the episode on any robot-obstacle contact
+    on_collision: bool = False  # end the episode on a robot-obstacle contact that pushes (ghost ones never do)
     field_grid_margin: float = 0.15  # [m] a query link this far outside its scene's field grid ends the episode
 
 
@@ -238,6 +238,11 @@ class EnvCfg:
     # force, as in the authors' release (no physical obstacles). A trip no longer ends in a fall, so the policy
     # learns to avoid contact before it must survive it. Evaluation is always physical (cat.eval.runner).
     ghost_obstacles: bool = False
+    # training aid: the same for the feet only (cat.envs.scene.make_feet_ghost). A foot in an obstacle is a
+    # collision (penalty, success rule) but does not push or end the episode; the rest of the body meets
+    # physical obstacles. Stepping over a bar is foot placement: this gives the per-step signal of where the foot
+    # went wrong that a contact-ends-the-episode rule does not. Evaluation is always physical.
+    ghost_feet: bool = False
     scene_variants: int = 10  # typical variants built when scene_dir is None (difficulty spread over [0, 1])
     scene_seed: int = 0  # seed of the typical variants (seeds scene_seed..+variants-1); not the RL seed
     # training aid: this many extra typical scenes per kind, easier than the paper's easiest (difficulty in

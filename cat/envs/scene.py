@@ -24,6 +24,10 @@ def foot_contact_sensor(foot_body: str) -> str:
     return f"floor_contact_{foot_body}"
 
 
+def foot_obstacle_sensor(foot_body: str) -> str:
+    return f"obstacle_contact_{foot_body}"
+
+
 GHOST_IMPEDANCE = 1.0e-4
 """solimp d of ghost obstacle contacts (MuJoCo's lowest impedance)."""
 GHOST_SOLREF = (-1.0e-6, -1.0e-6)
@@ -44,6 +48,29 @@ def make_obstacles_ghost(model: mujoco.MjModel) -> int:
     return len(geoms)
 
 
+def make_feet_ghost(model: mujoco.MjModel, robot: RobotCfg) -> int:
+    """Ghost contacts for the feet only: a foot's obstacle contacts are detected (its ``foot_obstacle_sensor``
+    and the collision sensor count them) but exert no force, while the foot still stands on the floor and the
+    rest of the body meets physical obstacles. MuJoCo takes a contact's parameters from the geom of higher
+    ``geom_priority``: the foot geoms get ghost parameters one level above everything else, the floor one level
+    above them, so floor contacts keep the floor's (normal) parameters and obstacle contacts take the feet's.
+    Returns the number of foot geoms changed."""
+    feet = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, f) for f in robot.feet]
+    if min(feet) < 0:
+        raise ValueError(f"foot bodies {robot.feet} not all in the model")
+    floor = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "floor")
+    if floor < 0:
+        raise ValueError("make_feet_ghost needs the env's 'floor' geom")
+    colliding = (model.geom_contype != 0) | (model.geom_conaffinity != 0)
+    geoms = np.flatnonzero(np.isin(model.geom_bodyid, feet) & colliding)
+    top = int(model.geom_priority.max())
+    model.geom_solimp[geoms, 0:2] = GHOST_IMPEDANCE
+    model.geom_solref[geoms] = GHOST_SOLREF
+    model.geom_priority[geoms] = top + 1
+    model.geom_priority[floor] = top + 2
+    return len(geoms)
+
+
 def build_env_model(
     robot: RobotCfg, add_obstacles: Callable[[mujoco.MjSpec], None] | None = None, visual_meshes: bool = False
 ) -> mujoco.MjModel:
@@ -53,7 +80,8 @@ def build_env_model(
     ``visual_meshes``: they make per-world model copies (domain randomisation) 500x slower.
 
     Sensors added (world frame): position and linear velocity of each query site, floor contact count per
-    foot, and (when the spec has an ``obstacles`` body) the number of robot-obstacle contacts.
+    foot, and (when the spec has an ``obstacles`` body) the number of robot-obstacle contacts, in all and per
+    foot.
     """
     return compile_model(env_spec(robot, add_obstacles, visual_meshes))
 
@@ -109,6 +137,16 @@ def env_spec(
             refname=OBSTACLE_BODY,
             intprm=found,
         )
+        for foot in robot.feet:  # which part touched (and the feet's share under task.ghost_feet)
+            spec.add_sensor(
+                name=foot_obstacle_sensor(foot),
+                type=mujoco.mjtSensor.mjSENS_CONTACT,
+                objtype=mujoco.mjtObj.mjOBJ_BODY,
+                objname=foot,
+                reftype=mujoco.mjtObj.mjOBJ_BODY,
+                refname=OBSTACLE_BODY,
+                intprm=found,
+            )
     return spec
 
 

@@ -35,6 +35,8 @@ from cat.envs.scene import (
     COLLISION_SENSOR,
     build_env_model,
     foot_contact_sensor,
+    foot_obstacle_sensor,
+    make_feet_ghost,
     make_obstacles_ghost,
     query_pos_sensor,
     query_vel_sensor,
@@ -61,7 +63,9 @@ class SimState:
     foot_pos: torch.Tensor  # (N, 2, 3)
     foot_vel: torch.Tensor
     foot_contact: torch.Tensor  # (N, 2) bool
-    collision: torch.Tensor  # (N,) bool
+    collision: torch.Tensor  # (N,) bool: any robot-obstacle contact (success rule, metrics, penalty)
+    hard_collision: torch.Tensor  # (N,) bool: a contact that exerts force (ends the episode under on_collision)
+    foot_collision: torch.Tensor  # (N, 2) bool: a foot touches an obstacle
 
 
 class TraversalEnv(VecEnv):
@@ -99,9 +103,11 @@ class TraversalEnv(VecEnv):
             models = self.world_models.models
         else:
             models = [build_env_model(self.robot, scenes.add_to_spec if scenes is not None else None)]
-        if cfg.ghost_obstacles:
-            for m in models:
+        for m in models:
+            if cfg.ghost_obstacles:
                 make_obstacles_ghost(m)
+            elif cfg.ghost_feet:
+                make_feet_ghost(m, self.robot)
         model = models[0]
         self.sim = make_backend(
             sim, model, self.num_envs, self.robot.decimation, device=device, world_models=self.world_models
@@ -187,6 +193,10 @@ class TraversalEnv(VecEnv):
         self._i_gyro = torch.tensor(cols("gyro_pelvis"), device=self.device)
         self._i_feet = torch.tensor([cols(foot_contact_sensor(f))[0] for f in r.feet], device=self.device)
         self._i_collision = cols(COLLISION_SENSOR)[0] if COLLISION_SENSOR in s.sensors else None
+        if self._i_collision is not None:
+            self._i_foot_collision = torch.tensor(
+                [cols(foot_obstacle_sensor(f))[0] for f in r.feet], device=self.device
+            )
         self._down = torch.tensor([0.0, 0.0, -1.0], device=self.device)
 
     def _read_state(self, ids: torch.Tensor | slice) -> SimState:
@@ -197,9 +207,14 @@ class TraversalEnv(VecEnv):
         quat = qpos[:, 3:7]
         link_pos, link_vel = sens[:, self._i_link_pos], sens[:, self._i_link_vel]
         if self._i_collision is None:
-            collision = torch.zeros(len(qpos), dtype=torch.bool, device=self.device)
+            contacts = torch.zeros(len(qpos), device=self.device)
+            feet = torch.zeros(len(qpos), len(self._i_feet), device=self.device)
         else:
-            collision = sens[:, self._i_collision] > 0
+            contacts, feet = sens[:, self._i_collision], sens[:, self._i_foot_collision]
+        # under ghost feet (or ghost obstacles) the ghost contacts are counted but push nothing
+        hard = torch.zeros_like(contacts) if self.cfg.ghost_obstacles else contacts
+        if self.cfg.ghost_feet:
+            hard = hard - feet.sum(dim=-1)
         return SimState(
             root_pos=qpos[:, :3],
             root_quat=quat,
@@ -214,7 +229,9 @@ class TraversalEnv(VecEnv):
             foot_pos=link_pos[:, self._foot_link],
             foot_vel=link_vel[:, self._foot_link],
             foot_contact=sens[:, self._i_feet] > 0,
-            collision=collision,
+            collision=contacts > 0,
+            hard_collision=hard > 0,
+            foot_collision=feet > 0,
         )
 
     def _update_state(self, env_ids: torch.Tensor | None = None) -> None:

@@ -21,7 +21,7 @@ def fallen(env: TraversalEnv) -> torch.Tensor:
 def collided(env: TraversalEnv) -> torch.Tensor:
     if not env.cfg.terminations.on_collision:
         return torch.zeros(env.num_envs, dtype=torch.bool, device=env.device)
-    return env.state.collision
+    return env.state.hard_collision
 
 
 def non_finite(env: TraversalEnv) -> torch.Tensor:

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import mujoco
 import numpy as np
-
 import torch
 
 from cat.envs.config import DomainRandCfg, EnvCfg
@@ -24,8 +23,8 @@ from cat.envs.scene_set import SceneSet
 from cat.envs.traversal_env import TraversalEnv
 from cat.eval.runner import EvalCfg, eval_task
 from cat.terrain import typical_variants
-from cat.terrain.typical import warmup_variants
 from cat.terrain.mujoco_export import add_obstacles_to_spec
+from cat.terrain.typical import warmup_variants
 
 
 def _robot_on_the_bar(ghost: bool):

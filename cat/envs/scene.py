@@ -116,38 +116,29 @@ def env_spec(
             objtype=mujoco.mjtObj.mjOBJ_SITE,
             objname=site,
         )
-    found = [1, 0, 1]  # data = found (contact count), no reduction, one slot
+    body, xbody, geom = mujoco.mjtObj.mjOBJ_BODY, mujoco.mjtObj.mjOBJ_XBODY, mujoco.mjtObj.mjOBJ_GEOM
     for foot in robot.feet:
-        spec.add_sensor(
-            name=foot_contact_sensor(foot),
-            type=mujoco.mjtSensor.mjSENS_CONTACT,
-            objtype=mujoco.mjtObj.mjOBJ_BODY,
-            objname=foot,
-            reftype=mujoco.mjtObj.mjOBJ_GEOM,
-            refname="floor",
-            intprm=found,
-        )
+        _contact_count_sensor(spec, foot_contact_sensor(foot), (body, foot), (geom, "floor"))
     if spec.body(OBSTACLE_BODY) is not None:
-        spec.add_sensor(
-            name=COLLISION_SENSOR,
-            type=mujoco.mjtSensor.mjSENS_CONTACT,
-            objtype=mujoco.mjtObj.mjOBJ_XBODY,
-            objname=robot.root_body,
-            reftype=mujoco.mjtObj.mjOBJ_BODY,
-            refname=OBSTACLE_BODY,
-            intprm=found,
-        )
+        _contact_count_sensor(spec, COLLISION_SENSOR, (xbody, robot.root_body), (body, OBSTACLE_BODY))
         for foot in robot.feet:  # which part touched (and the feet's share under task.ghost_feet)
-            spec.add_sensor(
-                name=foot_obstacle_sensor(foot),
-                type=mujoco.mjtSensor.mjSENS_CONTACT,
-                objtype=mujoco.mjtObj.mjOBJ_BODY,
-                objname=foot,
-                reftype=mujoco.mjtObj.mjOBJ_BODY,
-                refname=OBSTACLE_BODY,
-                intprm=found,
-            )
+            _contact_count_sensor(spec, foot_obstacle_sensor(foot), (body, foot), (body, OBSTACLE_BODY))
     return spec
+
+
+def _contact_count_sensor(
+    spec: mujoco.MjSpec, name: str, obj: tuple[mujoco.mjtObj, str], ref: tuple[mujoco.mjtObj, str]
+) -> None:
+    """A contact sensor whose one value is the number of contacts between ``obj`` and ``ref``."""
+    spec.add_sensor(
+        name=name,
+        type=mujoco.mjtSensor.mjSENS_CONTACT,
+        objtype=obj[0],
+        objname=obj[1],
+        reftype=ref[0],
+        refname=ref[1],
+        intprm=[1, 0, 1],  # data = found (contact count), no reduction, one slot
+    )
 
 
 def strip_visual_meshes(spec: mujoco.MjSpec) -> None:

@@ -1,11 +1,12 @@
-"""Ghost obstacles (``task.ghost_obstacles``) and ghost feet (``task.ghost_feet``): contacts are detected and
-counted, but exert no force (for the feet only: the rest of the body meets physical obstacles); evaluation always
+"""Ghost obstacles (``task.ghost_obstacles``) and ghost parts (``task.ghost_parts``): contacts are detected and
+counted, but exert no force (for the named robot bodies only: the rest meets physical obstacles); evaluation always
 meets physical obstacles."""
 
 from __future__ import annotations
 
 import mujoco
 import numpy as np
+import pytest
 import torch
 
 from cat.envs.config import DomainRandCfg, EnvCfg
@@ -13,10 +14,11 @@ from cat.envs.mdp.terminations import collided
 from cat.envs.robot import OBSTACLE_BODY, load_robot_cfg
 from cat.envs.scene import (
     COLLISION_SENSOR,
+    PART_SENSOR_PREFIX,
     build_env_model,
     foot_contact_sensor,
-    foot_obstacle_sensor,
-    make_feet_ghost,
+    part_obstacle_sensor,
+    make_parts_ghost,
     make_obstacles_ghost,
 )
 from cat.envs.scene_set import SceneSet
@@ -76,13 +78,17 @@ def test_evaluation_is_always_physical():
     assert eval_task(task, 4, EvalCfg()).ghost_obstacles is False
 
 
+FEET = ["left_ankle_roll_link", "right_ankle_roll_link"]
+LOWER_LEGS = [*FEET, "left_knee_link", "right_knee_link"]
+
+
 def _feet_in_the_warmup_bar(ghost_feet: bool):
     """The G1 standing with both feet inside the easiest hurdle-pass warm-up bar (4.5 cm high)."""
     robot = load_robot_cfg()
     scene = warmup_variants("hurdle-pass", 1, 0)[0]
     model = build_env_model(robot, lambda spec: add_obstacles_to_spec(spec, scene))
     if ghost_feet:
-        assert make_feet_ghost(model, robot) == 8  # a box and three capsules per foot
+        assert make_parts_ghost(model, FEET) == 8  # a box and three capsules per foot
     data = mujoco.MjData(model)
     bar = min(scene.mesh.split(only_watertight=False), key=lambda p: p.bounds[1, 2]).bounds
     data.qpos[0] = 0.5 * (bar[0, 0] + bar[1, 0]) - 0.04  # the foot centre (4 cm ahead of the ankle) on the bar
@@ -95,7 +101,7 @@ def test_ghost_feet_pass_through_the_bar_and_stand_on_the_floor():
     for ghost in (False, True):
         robot, model, data = _feet_in_the_warmup_bar(ghost)
         sensor = {n: data.sensordata[model.sensor_adr[model.sensor(n).id]] for n in (COLLISION_SENSOR,)}
-        feet = [data.sensordata[model.sensor_adr[model.sensor(foot_obstacle_sensor(f)).id]] for f in robot.feet]
+        feet = [data.sensordata[model.sensor_adr[model.sensor(part_obstacle_sensor(f)).id]] for f in robot.feet]
         assert min(feet) > 0 and sensor[COLLISION_SENSOR] == sum(feet)  # both feet, nothing else, touch
         weight = 9.81 * model.body_subtreemass[model.body(robot.root_body).id]
         normal = 0.0
@@ -115,7 +121,7 @@ def test_ghost_feet_leave_the_rest_of_the_body_physical():
     robot = load_robot_cfg()
     scene = typical_variants("hurdle-crouch", 1, 0)[0]
     model = build_env_model(robot, lambda spec: add_obstacles_to_spec(spec, scene))
-    make_feet_ghost(model, robot)
+    make_parts_ghost(model, FEET)
     data = mujoco.MjData(model)
     bar = scene.mesh.split(only_watertight=False)[0].bounds
     data.qpos[0] = 0.5 * (bar[0, 0] + bar[1, 0])
@@ -134,27 +140,45 @@ def test_ghost_feet_leave_the_rest_of_the_body_physical():
     assert max(by_part["foot"]) < 1.0 and max(by_part["other"]) > 10.0
 
 
-def test_env_ghost_feet_are_a_collision_that_does_not_end_the_episode():
-    scenes = SceneSet.typical("hurdle-pass", 2, variants=1, warmup=1, per_world=True)
-    cfg = EnvCfg(num_envs=2, ghost_feet=True, domain_rand=DomainRandCfg(enabled=False))
+def test_env_ghost_parts_are_a_collision_that_does_not_end_the_episode():
+    scenes = SceneSet.typical("hurdle-pass", 3, variants=1, warmup=1, per_world=True)
+    cfg = EnvCfg(num_envs=3, ghost_parts=LOWER_LEGS, domain_rand=DomainRandCfg(enabled=False))
     cfg.terminations.on_collision = True
     env = TraversalEnv(cfg, scenes=scenes, seed=0)
     assert env.scenes.scene_of_env[0] == 0 and env.scenes.scenes[0].difficulty == -1.0  # the 4.5 cm bar
-    qpos, qvel = env.sim.qpos[:1].clone(), env.sim.qvel[:1].clone()
-    qpos[0, :3] = torch.tensor([0.47 - 0.04, 0.0, 0.79], dtype=qpos.dtype)
-    qpos[0, 3:7] = torch.tensor([1.0, 0.0, 0.0, 0.0], dtype=qpos.dtype)
-    env.sim.reset(torch.tensor([0]), qpos, qvel)
+    env.scenes.assign_scenes(torch.tensor([2]), torch.tensor([0]))
+    qpos, qvel = env.sim.qpos[[0, 2]].clone(), env.sim.qvel[[0, 2]].clone()
+    qpos[:, 3:7] = torch.tensor([1.0, 0.0, 0.0, 0.0], dtype=qpos.dtype)
+    qpos[0, :3] = torch.tensor([0.47 - 0.04, 0.0, 0.79], dtype=qpos.dtype)  # env 0: feet in the bar
+    qpos[1, :3] = torch.tensor([0.47, 0.0, 0.50], dtype=qpos.dtype)  # env 2: crouched into it, pelvis touches
+    env.sim.reset(torch.tensor([0, 2]), qpos, qvel)
     env._update_state()
     s = env.state
-    assert s.collision[0] and s.foot_collision[0].all() and not s.hard_collision[0]
-    assert not collided(env)[0]
-    env.cfg.ghost_feet = False  # the same contacts read without the aid: they would end the episode
-    env._update_state()
-    assert env.state.hard_collision[0] and collided(env)[0]
-    env.cfg.ghost_feet = True
-    _, _, dones, _ = env.step(torch.zeros(2, 12))
-    assert not dones[0] and env.trial.collided[0]  # counted against success, the episode goes on
+    assert s.collision[0] and not s.hard_collision[0] and not collided(env)[0]
+    assert s.collision[2] and s.hard_collision[2] and collided(env)[2]
+    for _ in range(5):  # 0.1 s standing in the bar: every substep's feet contacts, never a hard one
+        _, _, dones, _ = env.step(torch.zeros(3, 12))
+        assert env.state.collision[0] and not env.state.hard_collision[0] and not dones[0]
+    assert env.trial.collided[0]  # counted against success, the episode goes on
+    with pytest.raises(ValueError, match=r"ghost_parts: no body \['torso'\] in the robot model"):
+        TraversalEnv(EnvCfg(num_envs=1, ghost_parts=["torso"]), scenes=scenes, seed=0)
+    with pytest.raises(ValueError, match=r"ghost_parts \['left_hip_pitch_link'\] have no collision geom"):
+        TraversalEnv(EnvCfg(num_envs=1, ghost_parts=["left_hip_pitch_link"]), scenes=scenes, seed=0)
 
 
-def test_evaluation_is_physical_for_ghost_feet_too():
-    assert eval_task(EnvCfg(ghost_feet=True), 4, EvalCfg()).ghost_feet is False
+def test_every_collision_body_has_an_obstacle_contact_sensor_reduced_over_substeps():
+    """The parts' counts are maxima over a control step's substeps, like the total: a last-substep count would
+    miss feet contacts of earlier substeps, and total minus feet would read them as a hard collision."""
+    scenes = SceneSet.typical("hurdle-pass", 2, variants=1, warmup=1, per_world=True)
+    env = TraversalEnv(EnvCfg(num_envs=2), scenes=scenes, seed=0)
+    model = env.sim.model
+    bodies = {model.body(model.geom_bodyid[model.geom(g).id]).name for g in env.robot.collision_geoms}
+    parts = {n.removeprefix(PART_SENSOR_PREFIX) for n in env.sim.sensors if n.startswith(PART_SENSOR_PREFIX)}
+    assert parts == bodies and set(env.robot.feet) <= parts
+    maxed = set(env.sim.max_columns)
+    for name in [COLLISION_SENSOR] + [part_obstacle_sensor(p) for p in parts]:
+        assert env.sim.sensors[name].adr in maxed
+
+
+def test_evaluation_is_physical_for_ghost_parts_too():
+    assert eval_task(EnvCfg(ghost_parts=FEET), 4, EvalCfg()).ghost_parts == []

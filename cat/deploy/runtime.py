@@ -262,7 +262,6 @@ class Runtime:
             foot_contact=torch.zeros(1, 2, dtype=torch.bool),
             collision=torch.zeros(1, dtype=torch.bool),
             hard_collision=torch.zeros(1, dtype=torch.bool),
-            foot_collision=torch.zeros(1, 2, dtype=torch.bool),
         )
 
     def _refresh_field_obs(self) -> None:

@@ -238,11 +238,11 @@ class EnvCfg:
     # force, as in the authors' release (no physical obstacles). A trip no longer ends in a fall, so the policy
     # learns to avoid contact before it must survive it. Evaluation is always physical (cat.eval.runner).
     ghost_obstacles: bool = False
-    # training aid: the same for the feet only (cat.envs.scene.make_feet_ghost). A foot in an obstacle is a
-    # collision (penalty, success rule) but does not push or end the episode; the rest of the body meets
-    # physical obstacles. Stepping over a bar is foot placement: this gives the per-step signal of where the foot
-    # went wrong that a contact-ends-the-episode rule does not. Evaluation is always physical.
-    ghost_feet: bool = False
+    # training aid: the same for some robot bodies only (cat.envs.scene.make_parts_ghost), e.g. the feet and
+    # shanks for hurdles. Their obstacle contacts are collisions (penalty, success rule) but neither push nor end
+    # the episode; the other bodies meet physical obstacles. Stepping over a bar is foot placement: this gives
+    # the per-step signal of where the foot went wrong that a contact-ends-the-episode rule does not.
+    ghost_parts: list[str] = field(default_factory=list)
     scene_variants: int = 10  # typical variants built when scene_dir is None (difficulty spread over [0, 1])
     scene_seed: int = 0  # seed of the typical variants (seeds scene_seed..+variants-1); not the RL seed
     # training aid: this many extra typical scenes per kind, easier than the paper's easiest (difficulty in

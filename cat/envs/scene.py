@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import mujoco
 import numpy as np
@@ -24,8 +24,13 @@ def foot_contact_sensor(foot_body: str) -> str:
     return f"floor_contact_{foot_body}"
 
 
-def foot_obstacle_sensor(foot_body: str) -> str:
-    return f"obstacle_contact_{foot_body}"
+PART_SENSOR_PREFIX = "obstacle_contact_"
+
+
+def part_obstacle_sensor(body: str) -> str:
+    """Contacts between one robot body's geoms and the obstacles (which part touched; the feet's share under
+    ``task.ghost_parts``)."""
+    return f"{PART_SENSOR_PREFIX}{body}"
 
 
 GHOST_IMPEDANCE = 1.0e-4
@@ -48,21 +53,22 @@ def make_obstacles_ghost(model: mujoco.MjModel) -> int:
     return len(geoms)
 
 
-def make_feet_ghost(model: mujoco.MjModel, robot: RobotCfg) -> int:
-    """Ghost contacts for the feet only: a foot's obstacle contacts are detected (its ``foot_obstacle_sensor``
-    and the collision sensor count them) but exert no force, while the foot still stands on the floor and the
-    rest of the body meets physical obstacles. MuJoCo takes a contact's parameters from the geom of higher
-    ``geom_priority``: the foot geoms get ghost parameters one level above everything else, the floor one level
-    above them, so floor contacts keep the floor's (normal) parameters and obstacle contacts take the feet's.
-    Returns the number of foot geoms changed."""
-    feet = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, f) for f in robot.feet]
-    if min(feet) < 0:
-        raise ValueError(f"foot bodies {robot.feet} not all in the model")
+def make_parts_ghost(model: mujoco.MjModel, bodies: Sequence[str]) -> int:
+    """Ghost contacts for some robot bodies only (``task.ghost_parts``, e.g. feet and shanks): their obstacle
+    contacts are detected (their ``part_obstacle_sensor`` and the collision sensor count them) but exert no
+    force, while they still stand on the floor and the other bodies meet physical obstacles. MuJoCo takes a
+    contact's parameters from the geom of higher ``geom_priority``: these bodies' geoms get ghost parameters
+    one level above everything else, the floor one level above them, so floor contacts keep the floor's
+    (normal) parameters and obstacle contacts take the ghost ones. Returns the number of geoms changed."""
+    ids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, b) for b in bodies]
+    unknown = [b for b, i in zip(bodies, ids, strict=True) if i < 0]
+    if unknown:
+        raise ValueError(f"ghost_parts: no body {unknown} in the robot model")
     floor = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "floor")
     if floor < 0:
-        raise ValueError("make_feet_ghost needs the env's 'floor' geom")
+        raise ValueError("ghost parts need the env's 'floor' geom")
     colliding = (model.geom_contype != 0) | (model.geom_conaffinity != 0)
-    geoms = np.flatnonzero(np.isin(model.geom_bodyid, feet) & colliding)
+    geoms = np.flatnonzero(np.isin(model.geom_bodyid, ids) & colliding)
     top = int(model.geom_priority.max())
     model.geom_solimp[geoms, 0:2] = GHOST_IMPEDANCE
     model.geom_solref[geoms] = GHOST_SOLREF
@@ -81,7 +87,7 @@ def build_env_model(
 
     Sensors added (world frame): position and linear velocity of each query site, floor contact count per
     foot, and (when the spec has an ``obstacles`` body) the number of robot-obstacle contacts, in all and per
-    foot.
+    robot body with a collision geom.
     """
     return compile_model(env_spec(robot, add_obstacles, visual_meshes))
 
@@ -121,8 +127,10 @@ def env_spec(
         _contact_count_sensor(spec, foot_contact_sensor(foot), (body, foot), (geom, "floor"))
     if spec.body(OBSTACLE_BODY) is not None:
         _contact_count_sensor(spec, COLLISION_SENSOR, (xbody, robot.root_body), (body, OBSTACLE_BODY))
-        for foot in robot.feet:  # which part touched (and the feet's share under task.ghost_feet)
-            _contact_count_sensor(spec, foot_obstacle_sensor(foot), (body, foot), (body, OBSTACLE_BODY))
+        wanted = set(robot.collision_geoms)
+        for part in spec.bodies:  # every robot body with a collision geom
+            if any(g.name in wanted for g in part.geoms):
+                _contact_count_sensor(spec, part_obstacle_sensor(part.name), (body, part.name), (body, OBSTACLE_BODY))
     return spec
 
 

@@ -33,10 +33,11 @@ from cat.envs.perception import ScenePerception
 from cat.envs.robot import RobotCfg, home_qpos, load_robot_cfg
 from cat.envs.scene import (
     COLLISION_SENSOR,
+    PART_SENSOR_PREFIX,
     build_env_model,
     foot_contact_sensor,
-    foot_obstacle_sensor,
-    make_feet_ghost,
+    part_obstacle_sensor,
+    make_parts_ghost,
     make_obstacles_ghost,
     query_pos_sensor,
     query_vel_sensor,
@@ -65,7 +66,6 @@ class SimState:
     foot_contact: torch.Tensor  # (N, 2) bool
     collision: torch.Tensor  # (N,) bool: any robot-obstacle contact (success rule, metrics, penalty)
     hard_collision: torch.Tensor  # (N,) bool: a contact that exerts force (ends the episode under on_collision)
-    foot_collision: torch.Tensor  # (N, 2) bool: a foot touches an obstacle
 
 
 class TraversalEnv(VecEnv):
@@ -106,8 +106,8 @@ class TraversalEnv(VecEnv):
         for m in models:
             if cfg.ghost_obstacles:
                 make_obstacles_ghost(m)
-            elif cfg.ghost_feet:
-                make_feet_ghost(m, self.robot)
+            elif cfg.ghost_parts:
+                make_parts_ghost(m, cfg.ghost_parts)
         model = models[0]
         self.sim = make_backend(
             sim, model, self.num_envs, self.robot.decimation, device=device, world_models=self.world_models
@@ -193,10 +193,14 @@ class TraversalEnv(VecEnv):
         self._i_gyro = torch.tensor(cols("gyro_pelvis"), device=self.device)
         self._i_feet = torch.tensor([cols(foot_contact_sensor(f))[0] for f in r.feet], device=self.device)
         self._i_collision = cols(COLLISION_SENSOR)[0] if COLLISION_SENSOR in s.sensors else None
-        if self._i_collision is not None:
-            self._i_foot_collision = torch.tensor(
-                [cols(foot_obstacle_sensor(f))[0] for f in r.feet], device=self.device
-            )
+        self._i_hard_collision = None  # with ghost parts: the other bodies' contacts (max over the substeps)
+        if self._i_collision is not None and self.cfg.ghost_parts:
+            parts = [n.removeprefix(PART_SENSOR_PREFIX) for n in s.sensors if n.startswith(PART_SENSOR_PREFIX)]
+            missing = sorted(set(self.cfg.ghost_parts) - set(parts))
+            if missing:
+                raise ValueError(f"ghost_parts {missing} have no collision geom; robot bodies that do: {parts}")
+            hard = [p for p in parts if p not in self.cfg.ghost_parts]
+            self._i_hard_collision = torch.tensor([cols(part_obstacle_sensor(p))[0] for p in hard], device=self.device)
         self._down = torch.tensor([0.0, 0.0, -1.0], device=self.device)
 
     def _read_state(self, ids: torch.Tensor | slice) -> SimState:
@@ -207,14 +211,16 @@ class TraversalEnv(VecEnv):
         quat = qpos[:, 3:7]
         link_pos, link_vel = sens[:, self._i_link_pos], sens[:, self._i_link_vel]
         if self._i_collision is None:
-            contacts = torch.zeros(len(qpos), device=self.device)
-            feet = torch.zeros(len(qpos), len(self._i_feet), device=self.device)
+            collision = torch.zeros(len(qpos), dtype=torch.bool, device=self.device)
         else:
-            contacts, feet = sens[:, self._i_collision], sens[:, self._i_foot_collision]
-        # under ghost feet (or ghost obstacles) the ghost contacts are counted but push nothing
-        hard = torch.zeros_like(contacts) if self.cfg.ghost_obstacles else contacts
-        if self.cfg.ghost_feet:
-            hard = hard - feet.sum(dim=-1)
+            collision = sens[:, self._i_collision] > 0
+        # ghost contacts (all of them, or some parts') are counted but push nothing
+        if self.cfg.ghost_obstacles:
+            hard = torch.zeros_like(collision)
+        elif self._i_hard_collision is not None:
+            hard = (sens[:, self._i_hard_collision] > 0).any(dim=-1)
+        else:
+            hard = collision
         return SimState(
             root_pos=qpos[:, :3],
             root_quat=quat,
@@ -229,9 +235,8 @@ class TraversalEnv(VecEnv):
             foot_pos=link_pos[:, self._foot_link],
             foot_vel=link_vel[:, self._foot_link],
             foot_contact=sens[:, self._i_feet] > 0,
-            collision=contacts > 0,
-            hard_collision=hard > 0,
-            foot_collision=feet > 0,
+            collision=collision,
+            hard_collision=hard,
         )
 
     def _update_state(self, env_ids: torch.Tensor | None = None) -> None:

@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING
 
 import mujoco
 
-from cat.envs.scene import COLLISION_SENSOR
+from cat.envs.scene import COLLISION_SENSOR, PART_SENSOR_PREFIX
 from cat.envs.sim.base import PhysicsBackend
 
 if TYPE_CHECKING:
@@ -41,12 +41,12 @@ def make_backend(
     ``world_models``: per-world scenes; every world starts on ``world_models.models[0]`` (``assign_models``).
 
     ``max_sensors``: sensors reported as their maximum over the substeps of a control step; ``None``: the
-    robot-obstacle contact sensor when the model has one (collisions count on every physics substep).
+    robot-obstacle contact sensors when the model has them (collisions count on every physics substep).
     """
     check_backend(name)
     if max_sensors is None:
         names = {model.sensor(i).name for i in range(model.nsensor)}
-        max_sensors = (COLLISION_SENSOR,) if COLLISION_SENSOR in names else ()
+        max_sensors = tuple(n for n in sorted(names) if n == COLLISION_SENSOR or n.startswith(PART_SENSOR_PREFIX))
     if name == "mujoco":
         if not device.startswith("cpu"):
             raise ValueError(f"sim=mujoco runs on the CPU; got device={device!r}. Use sim=warp for CUDA.")

@@ -17,9 +17,9 @@ from cat.envs.scene import (
     PART_SENSOR_PREFIX,
     build_env_model,
     foot_contact_sensor,
-    part_obstacle_sensor,
-    make_parts_ghost,
     make_obstacles_ghost,
+    make_parts_ghost,
+    part_obstacle_sensor,
 )
 from cat.envs.scene_set import SceneSet
 from cat.envs.traversal_env import TraversalEnv

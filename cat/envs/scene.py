@@ -46,11 +46,7 @@ def make_obstacles_ghost(model: mujoco.MjModel) -> int:
     body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, OBSTACLE_BODY)
     if body < 0:
         return 0
-    geoms = np.flatnonzero(model.geom_bodyid == body)
-    model.geom_solimp[geoms, 0:2] = GHOST_IMPEDANCE
-    model.geom_solref[geoms] = GHOST_SOLREF
-    model.geom_priority[geoms] = model.geom_priority.max() + 1
-    return len(geoms)
+    return _make_geoms_ghost(model, np.flatnonzero(model.geom_bodyid == body))
 
 
 def make_parts_ghost(model: mujoco.MjModel, bodies: Sequence[str]) -> int:
@@ -68,12 +64,18 @@ def make_parts_ghost(model: mujoco.MjModel, bodies: Sequence[str]) -> int:
     if floor < 0:
         raise ValueError("ghost parts need the env's 'floor' geom")
     colliding = (model.geom_contype != 0) | (model.geom_conaffinity != 0)
-    geoms = np.flatnonzero(np.isin(model.geom_bodyid, ids) & colliding)
-    top = int(model.geom_priority.max())
+    n = _make_geoms_ghost(model, np.flatnonzero(np.isin(model.geom_bodyid, ids) & colliding))
+    model.geom_priority[floor] = model.geom_priority.max() + 1
+    return n
+
+
+def _make_geoms_ghost(model: mujoco.MjModel, geoms: np.ndarray) -> int:
+    """Ghost solver parameters on ``geoms``, one ``geom_priority`` level above every other geom so that theirs
+    set each of their contacts. Returns the number of geoms changed."""
+    top = model.geom_priority.max()
     model.geom_solimp[geoms, 0:2] = GHOST_IMPEDANCE
     model.geom_solref[geoms] = GHOST_SOLREF
     model.geom_priority[geoms] = top + 1
-    model.geom_priority[floor] = top + 2
     return len(geoms)
 
 

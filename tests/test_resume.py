@@ -36,6 +36,16 @@ def test_resume_gives_the_same_next_update(tmp_path):
     assert a["optimizer_state_dict"]["param_groups"][0]["lr"] == b["optimizer_state_dict"]["param_groups"][0]["lr"]
 
 
+def test_a_learning_rate_given_on_resume_replaces_the_optimisers(tmp_path):
+    run = train(load_config(_base(tmp_path, "max_iterations=2", "algo.schedule=fixed")))
+    kept = train(resume_config(run / "model_1.pt", ["max_iterations=3"]))
+    lr = torch.load(kept / "model_2.pt", weights_only=False)["optimizer_state_dict"]["param_groups"][0]["lr"]
+    assert lr == pytest.approx(3e-4)  # the run's own rate when none is given
+    train(resume_config(run / "model_2.pt", ["max_iterations=4", "algo.learning_rate=1e-5"]))
+    lr = torch.load(run / "model_3.pt", weights_only=False)["optimizer_state_dict"]["param_groups"][0]["lr"]
+    assert lr == pytest.approx(1e-5)
+
+
 def test_resume_from_an_earlier_checkpoint_redoes_the_later_rows(tmp_path):
     run = train(load_config(_base(tmp_path, "max_iterations=3")))  # logged iterations 0, 1, 2
     train(resume_config(run / "model_1.pt", ["max_iterations=3"]))  # as after a kill past model_1: redo 2

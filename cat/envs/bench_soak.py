@@ -19,6 +19,7 @@ from collections import Counter
 from pathlib import Path
 
 import torch
+from tqdm import tqdm
 
 from cat.envs.config import EnvCfg, PushCfg
 from cat.envs.mdp import rewards as rew_terms
@@ -110,10 +111,12 @@ def main(argv: list[str] | None = None) -> None:
     nonfinite_obs, resets, steps = 0, 0, 0
     rew_names = list(env.reward_names)
     t0 = time.perf_counter()
-    with _Recorder(rew_terms, rew_names) as rew:
+    bar = tqdm(total=total, desc="soak", unit="step", unit_scale=True, mininterval=30)
+    with _Recorder(rew_terms, rew_names) as rew, bar:
         while steps < total:
             obs, reward, done, extras = env.step(2 * torch.rand(args.envs, env.num_actions, generator=gen) - 1)
             steps += args.envs
+            bar.update(args.envs)
             nonfinite_obs += sum(int((~torch.isfinite(v)).sum()) for v in obs.values())
             rew.nonfinite += int((~torch.isfinite(reward)).sum())
             ids = done.nonzero().flatten()

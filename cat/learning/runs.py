@@ -280,8 +280,20 @@ def _save_with_state(runner: OnPolicyRunner, env: TraversalEnv, save) -> None:
     runner.save = save_all
 
 
-def _restore_training_state(runner: OnPolicyRunner, env: TraversalEnv, checkpoint: str, infos: dict | None) -> None:
-    # the adaptive schedule continues from the learning rate in use, not the configured start value
+def configured_learning_rate(cfg: TrainCfg) -> float:
+    """The learning rate the config asks for (PPO's start value, or the distillation student's)."""
+    return cfg.algo.distill.learning_rate if cfg.algo.name == "distill" else cfg.algo.learning_rate
+
+
+def _restore_training_state(
+    runner: OnPolicyRunner, env: TraversalEnv, checkpoint: str, infos: dict | None, lr_override: float | None = None
+) -> None:
+    """``lr_override``: a learning rate given on the command line of the resume; otherwise the optimiser (and
+    PPO's adaptive schedule) continues from the rate in use, not the configured start value."""
+    if lr_override is not None:
+        for group in runner.alg.optimizer.param_groups:
+            group["lr"] = lr_override
+        log.info("resume: learning rate set to %g (given on the command line)", lr_override)
     runner.alg.learning_rate = runner.alg.optimizer.param_groups[0]["lr"]
     if not infos:
         log.warning("checkpoint has no training state (RNG, curriculum): continuing from fresh streams")
@@ -323,13 +335,17 @@ def train(cfg: TrainCfg) -> Path:
 
 
 def _train_in(cfg: TrainCfg, env: TraversalEnv, run_dir: Path) -> Path:
+    lr_override = None
+    if cfg.resume:  # read before save_config overwrites the run's config.yaml
+        lr = configured_learning_rate(cfg)
+        lr_override = lr if lr != configured_learning_rate(load_run_config(cfg.resume)) else None
     save_config(cfg, run_dir)
     log.info("run folder: %s", run_dir)
     with quiet_constructor(cfg.verbose):
         runner = make_runner(cfg, env, str(run_dir))
     runner.logger.git_status_repos = [cat.__file__]  # record this project's commit and diff in <run>/git/
     if cfg.resume:
-        _restore_training_state(runner, env, cfg.resume, runner.load(cfg.resume))
+        _restore_training_state(runner, env, cfg.resume, runner.load(cfg.resume), lr_override)
         runner.current_learning_iteration += 1  # the checkpoint's iteration is complete
         dropped = prune_metrics(run_dir / "metrics.csv", runner.current_learning_iteration)
         if dropped:

@@ -216,3 +216,19 @@ def test_runtime_reads_its_field_block(robot_cfg):
     assert [(t["name"], t["size"]) for t in terms] == [("goal_command", 3), ("field_block", K7), (TERMS[1], K7)]
     a, b = term_info("field_block", task, robot_cfg), term_info(TERMS[1], task, robot_cfg)
     assert (a.size, a.clip) == (b.size, b.clip)
+
+
+def test_a_snapshot_of_another_model_is_refused_before_anything_changes():
+    """A snapshot whose sensors (or any tensor) have another shape, e.g. saved before sensors were added,
+    raises naming the tensor and leaves the env as it was (a resumed run then starts fresh episodes)."""
+    env = _scene_env(2, 0.1, 0.05, seed=3)
+    env.step(torch.full((2, 12), 0.1))
+    snap = env.get_state()
+    snap["sim"]["sensordata"] = snap["sim"]["sensordata"][:, :-18]
+    env.step(torch.full((2, 12), -0.1))
+    before = env.get_state()
+    with pytest.raises(ValueError, match=r"sim\.sensordata has shape"):
+        env.set_state(snap)
+    after = env.get_state()
+    torch.testing.assert_close(after["sim"], before["sim"], rtol=0, atol=0)
+    torch.testing.assert_close(after["targets"], before["targets"], rtol=0, atol=0)

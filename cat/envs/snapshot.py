@@ -45,6 +45,16 @@ def get_state(env: TraversalEnv) -> dict:
     return snap
 
 
+def _shape_mismatches(snap: dict, current: dict, prefix: str = ""):
+    """(key, snapshot shape, env shape) of every tensor, nested dicts included, whose shapes differ."""
+    for key, want in current.items():
+        have = snap.get(key)
+        if isinstance(want, dict) and isinstance(have, dict):
+            yield from _shape_mismatches(have, want, f"{prefix}{key}.")
+        elif isinstance(want, torch.Tensor) and isinstance(have, torch.Tensor) and have.shape != want.shape:
+            yield f"{prefix}{key}", tuple(have.shape), tuple(want.shape)
+
+
 def set_state(env: TraversalEnv, snap: dict) -> None:
     """Restore ``get_state``'s snapshot (same task and number of envs); checked before anything changes."""
     if snap.get("format") != FORMAT:
@@ -63,6 +73,8 @@ def set_state(env: TraversalEnv, snap: dict) -> None:
         raise ValueError("env snapshot has odometry drift (field_block_odometry with noise on); this env has none")
     if env.world_models is not None and snap["world_model_scales"].shape != env.world_models.scales.shape:
         raise ValueError("env snapshot has another per-world model pool (scenes x domain_rand.pool_size)")
+    for key, have, want in _shape_mismatches(snap, current):
+        raise ValueError(f"env snapshot's {key} has shape {have}, this env's {want} (another model or task)")
     for name in FIELDS:
         getattr(env, name).copy_(snap[name])
     for k, v in snap["episode_sums"].items():

@@ -259,9 +259,15 @@ def make_runner(cfg: TrainCfg, env: TraversalEnv, log_dir: str | None) -> OnPoli
     return OnPolicyRunner(env, runner_cfg(cfg.algo, env.obs_groups), log_dir=log_dir, device=str(env.device))
 
 
-def _training_state(env: TraversalEnv) -> dict:
-    """What a resumed run needs beyond rsl_rl's checkpoint: RNG streams (and the env's curriculum)."""
-    return {"torch_rng": torch.get_rng_state(), "env_rng": env.generator.get_state(), **env.training_state()}
+def _training_state(env: TraversalEnv, cfg: TrainCfg) -> dict:
+    """What a resumed run needs beyond rsl_rl's checkpoint: RNG streams, the env's curriculum, and the configured
+    learning rate (a resume that gives another one replaces the optimiser's)."""
+    return {
+        "torch_rng": torch.get_rng_state(),
+        "env_rng": env.generator.get_state(),
+        "configured_lr": configured_learning_rate(cfg),
+        **env.training_state(),
+    }
 
 
 def env_snapshot_path(checkpoint: str | os.PathLike) -> Path:
@@ -270,11 +276,11 @@ def env_snapshot_path(checkpoint: str | os.PathLike) -> Path:
     return ckpt.with_name(ckpt.name.replace("model_", "env_", 1))
 
 
-def _save_with_state(runner: OnPolicyRunner, env: TraversalEnv, save) -> None:
+def _save_with_state(runner: OnPolicyRunner, env: TraversalEnv, cfg: TrainCfg, save) -> None:
     """Checkpoints also carry RNG + curriculum (in ``infos``) and an env snapshot file beside them."""
 
     def save_all(path: str, infos: dict | None = None) -> None:
-        save(path, infos=_training_state(env))
+        save(path, infos=_training_state(env, cfg))
         torch.save(env.get_state(), env_snapshot_path(path))
 
     runner.save = save_all
@@ -286,14 +292,17 @@ def configured_learning_rate(cfg: TrainCfg) -> float:
 
 
 def _restore_training_state(
-    runner: OnPolicyRunner, env: TraversalEnv, checkpoint: str, infos: dict | None, lr_override: float | None = None
+    runner: OnPolicyRunner, env: TraversalEnv, cfg: TrainCfg, infos: dict | None, run_lr: float
 ) -> None:
-    """``lr_override``: a learning rate given on the command line of the resume; otherwise the optimiser (and
-    PPO's adaptive schedule) continues from the rate in use, not the configured start value."""
-    if lr_override is not None:
+    """A learning rate configured other than the run's (``infos``' ``configured_lr``, else ``run_lr`` from the
+    run's config.yaml) was given on the resume's command line and replaces the optimiser's; otherwise the
+    optimiser (and PPO's adaptive schedule) continues from the rate in use, not the configured start value."""
+    checkpoint = cfg.resume
+    lr = configured_learning_rate(cfg)
+    if lr != (infos or {}).get("configured_lr", run_lr):
         for group in runner.alg.optimizer.param_groups:
-            group["lr"] = lr_override
-        log.info("resume: learning rate set to %g (given on the command line)", lr_override)
+            group["lr"] = lr
+        log.info("resume: learning rate set to %g (given on the command line)", lr)
     runner.alg.learning_rate = runner.alg.optimizer.param_groups[0]["lr"]
     if not infos:
         log.warning("checkpoint has no training state (RNG, curriculum): continuing from fresh streams")
@@ -335,17 +344,16 @@ def train(cfg: TrainCfg) -> Path:
 
 
 def _train_in(cfg: TrainCfg, env: TraversalEnv, run_dir: Path) -> Path:
-    lr_override = None
-    if cfg.resume:  # read before save_config overwrites the run's config.yaml
-        lr = configured_learning_rate(cfg)
-        lr_override = lr if lr != configured_learning_rate(load_run_config(cfg.resume)) else None
-    save_config(cfg, run_dir)
+    run_lr = configured_learning_rate(load_run_config(cfg.resume)) if cfg.resume else 0.0
+    if not cfg.resume:  # a resume rewrites the run's config.yaml only once it stands
+        save_config(cfg, run_dir)
     log.info("run folder: %s", run_dir)
     with quiet_constructor(cfg.verbose):
         runner = make_runner(cfg, env, str(run_dir))
     runner.logger.git_status_repos = [cat.__file__]  # record this project's commit and diff in <run>/git/
     if cfg.resume:
-        _restore_training_state(runner, env, cfg.resume, runner.load(cfg.resume), lr_override)
+        _restore_training_state(runner, env, cfg, runner.load(cfg.resume), run_lr)
+        save_config(cfg, run_dir)
         runner.current_learning_iteration += 1  # the checkpoint's iteration is complete
         dropped = prune_metrics(run_dir / "metrics.csv", runner.current_learning_iteration)
         if dropped:
@@ -362,7 +370,7 @@ def _train_in(cfg: TrainCfg, env: TraversalEnv, run_dir: Path) -> Path:
             "nothing to do: the run is at iteration %d of %d", runner.current_learning_iteration, cfg.max_iterations
         )
         return run_dir
-    _save_with_state(runner, env, runner.save)
+    _save_with_state(runner, env, cfg, runner.save)
     install_iteration_hook(runner, cfg.max_iterations, cfg.max_minutes, cfg.verbose)
     try:
         with quiet_constructor(cfg.verbose):  # rsl_rl's "Storing git diff" lines

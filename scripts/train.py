@@ -15,8 +15,10 @@ from cat.learning.runs import CheckpointError, resume_config, train, validate_tr
 
 
 def _load(overrides: list[str]):
-    cfg = load_config(overrides)
-    cfg = resume_config(cfg.resume, overrides) if cfg.resume else cfg
+    # a resume starts from the run's own config, so keys only its task has (e.g. a distillation's teacher group)
+    # can be changed; composing the defaults first would refuse them
+    resume = next((o.split("=", 1)[1] for o in overrides if o.startswith("resume=")), "")
+    cfg = resume_config(resume, overrides) if resume not in ("", "null") else load_config(overrides)
     validate_train_cfg(cfg)  # every job of a multirun is checked before the first starts
     return cfg
 

@@ -147,3 +147,18 @@ def test_play_refuses_bad_values(tiny_run, caplog, args, needle):
         code = mod.main([f"checkpoint={tiny_run}", *args])
     errors = [r.getMessage() for r in caplog.records if r.levelno >= logging.ERROR]
     assert code == 2 and len(errors) == 1 and needle in errors[0], errors
+
+
+def test_resume_overrides_keys_only_the_runs_task_has(tiny_run, tmp_path):
+    """``resume=`` reads the run's config before the overrides: a group only that run defines can be changed."""
+    import shutil
+
+    run = tmp_path / "run"
+    shutil.copytree(tiny_run, run)
+    cfg = yaml.safe_load((run / "config.yaml").read_text())
+    cfg["task"]["observations"]["probe"] = {"terms": ["gyro"], "noise": False}
+    (run / "config.yaml").write_text(yaml.safe_dump(cfg))
+    ckpt = next(run.glob("model_*.pt"))
+    loaded = _script()._load([f"resume={ckpt}", "task.observations.probe.noise=true", "max_iterations=3"])
+    assert loaded.task.observations["probe"].noise is True and loaded.max_iterations == 3
+    assert loaded.resume == str(ckpt)

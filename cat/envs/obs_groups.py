@@ -4,8 +4,10 @@ change config.
 
 A group's terms are the functions of ``cat.envs.mdp.observations`` named in its list, concatenated in order,
 after the resolved terms of the group it ``extends``. Every term is evaluated once per step and shared by the
-groups that list it; groups with ``noise: true`` add ``NoiseCfg``'s per-term noise to their copy. A group with
-``history: H`` > 1 reads its last H vectors (noisy as observed), oldest first.
+groups that list it; groups with ``noise: true`` read it with ``NoiseCfg``'s per-term noise, drawn once per step
+and term, so every noisy group sees the same reading (one sensor, one reading: a distillation teacher with
+``noise: true`` labels from exactly what the student observes). A group with ``history: H`` > 1 reads its last
+H vectors (noisy as observed), oldest first.
 """
 
 from __future__ import annotations
@@ -108,8 +110,10 @@ class ObservationGroups:
         return any(t in self.fns for t in terms)
 
     def compute(self, env: TraversalEnv) -> TensorDict:
-        """Every group for all envs; each term evaluated once, noise drawn per noisy group in term order."""
+        """Every group for all envs; each term evaluated once, its noise drawn once (at its first noisy group, in
+        group and term order) and shared by every noisy group."""
         values: dict[str, torch.Tensor] = {}
+        noisy_values: dict[str, torch.Tensor] = {}
         noise = self.cfg.noise
         out = {}
         for group, terms in self.groups.items():
@@ -120,7 +124,9 @@ class ObservationGroups:
                 value = values[name]
                 scale = getattr(noise, name, 0.0)
                 if self.noisy[group] and noise.enabled and scale > 0:
-                    value = _noisy(name, value, scale)
+                    if name not in noisy_values:
+                        noisy_values[name] = _noisy(name, value, scale)
+                    value = noisy_values[name]
                 parts.append(value)
             out[group] = self._stack(group, torch.cat(parts, dim=-1))
         if self._fresh is not None:

@@ -181,4 +181,36 @@ def test_every_collision_body_has_an_obstacle_contact_sensor_reduced_over_subste
 
 
 def test_evaluation_is_physical_for_ghost_parts_too():
-    assert eval_task(EnvCfg(ghost_parts=FEET), 4, EvalCfg()).ghost_parts == []
+    evaluated = eval_task(EnvCfg(ghost_parts=FEET, ghost_parts_physical=0.5), 4, EvalCfg())
+    assert evaluated.ghost_parts == [] and evaluated.ghost_parts_physical == 0.0
+
+
+def test_a_share_of_pool_members_keeps_the_ghost_parts_physical():
+    """``ghost_parts_physical=0.5`` with a pool of 2: member 0 of each scene keeps the feet and shanks physical
+    (feet in the bar are a hard collision), member 1 has them ghost (the same contact is not)."""
+    scenes = SceneSet.typical("hurdle-pass", 2, variants=1, warmup=1, per_world=True)
+    dr = DomainRandCfg(enabled=True, pool_size=2)
+    cfg = EnvCfg(num_envs=2, ghost_parts=LOWER_LEGS, ghost_parts_physical=0.5, domain_rand=dr)
+    env = TraversalEnv(cfg, scenes=scenes, seed=0)
+    wm = env.world_models
+    foot = env.sim.model.geom("left_foot1_collision").id
+    ghost_ref = [float(wm.models[wm.ids(torch.tensor([0]), torch.tensor([k]))].geom_solref[foot, 0]) for k in (0, 1)]
+    assert ghost_ref[0] > 0 and ghost_ref[1] < 0  # member 0: the robot's own contact, member 1: ghost
+    ids = torch.tensor([0, 1])
+    env.scenes.assign_scenes(ids, torch.tensor([0, 0]))  # both on the 4.5 cm warm-up bar
+    env.sim.assign_models(ids, wm.ids(torch.tensor([0, 0]), torch.tensor([0, 1])))
+    qpos, qvel = env.sim.qpos.clone(), env.sim.qvel.clone()
+    qpos[:, 3:7] = torch.tensor([1.0, 0.0, 0.0, 0.0], dtype=qpos.dtype)
+    qpos[:, :3] = torch.tensor([0.47 - 0.04, 0.0, 0.79], dtype=qpos.dtype)  # feet in the bar
+    env.sim.reset(ids, qpos, qvel)
+    env._update_state()
+    assert env.state.collision.all()
+    assert env.state.hard_collision.tolist() == [True, False]
+    bad = [
+        (dict(ghost_parts_physical=1.5), r"ghost_parts_physical=1.5: must be in \[0, 1\]"),
+        (dict(ghost_parts=[], ghost_parts_physical=0.5), "needs task.ghost_parts"),
+        (dict(ghost_parts_physical=0.5, domain_rand=DomainRandCfg(enabled=False)), "needs sim.per_world_scenes"),
+    ]
+    for kw, message in bad:
+        with pytest.raises(ValueError, match=message):
+            TraversalEnv(EnvCfg(num_envs=2, **{"ghost_parts": LOWER_LEGS, "domain_rand": dr, **kw}), scenes=scenes)

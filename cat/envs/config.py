@@ -243,6 +243,10 @@ class EnvCfg:
     # the episode; the other bodies meet physical obstacles. Stepping over a bar is foot placement: this gives
     # the per-step signal of where the foot went wrong that a contact-ends-the-episode rule does not.
     ghost_parts: list[str] = field(default_factory=list)
+    # the way from ghost parts back to physical ones: this fraction of the domain-randomisation pool members of
+    # every scene keeps the parts physical (needs sim.per_world_scenes and domain_rand; the pool member is drawn
+    # per episode), so that share of episodes meets the bars as evaluation does. Raise it across sittings.
+    ghost_parts_physical: float = 0.0
     scene_variants: int = 10  # typical variants built when scene_dir is None (difficulty spread over [0, 1])
     scene_seed: int = 0  # seed of the typical variants (seeds scene_seed..+variants-1); not the RL seed
     # training aid: this many extra typical scenes per kind, easier than the paper's easiest (difficulty in

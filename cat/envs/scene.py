@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING
 
 import mujoco
 import numpy as np
 
 from cat.envs.robot import OBSTACLE_BODY, RobotCfg, compile_model, robot_spec
+
+if TYPE_CHECKING:
+    from cat.envs.config import EnvCfg
 
 COLLISION_SENSOR = "robot_obstacle_contact"
 
@@ -67,6 +71,36 @@ def make_parts_ghost(model: mujoco.MjModel, bodies: Sequence[str]) -> int:
     n = _make_geoms_ghost(model, np.flatnonzero(np.isin(model.geom_bodyid, ids) & colliding))
     model.geom_priority[floor] = model.geom_priority.max() + 1
     return n
+
+
+def make_training_ghosts(models: Sequence[mujoco.MjModel], cfg: EnvCfg, pool: int = 0) -> int:
+    """Apply ``cfg.ghost_obstacles`` / ``cfg.ghost_parts`` to the env's models (one model, or the per-world table
+    of ``pool`` members per scene, scene-major). Returns the pool members per scene whose parts stay physical."""
+    physical = physical_pool_members(cfg, pool)
+    for i, m in enumerate(models):
+        if cfg.ghost_obstacles:
+            make_obstacles_ghost(m)
+        elif cfg.ghost_parts and not (physical and i % pool < physical):
+            make_parts_ghost(m, cfg.ghost_parts)
+    return physical
+
+
+def physical_pool_members(cfg: EnvCfg, pool: int) -> int:
+    """How many of each scene's ``pool`` per-world models (domain-randomisation members; 0: no per-world models)
+    keep ``cfg.ghost_parts`` physical under ``cfg.ghost_parts_physical``; clear errors for what it needs."""
+    frac = cfg.ghost_parts_physical
+    if not 0.0 <= frac <= 1.0:
+        raise ValueError(f"task.ghost_parts_physical={frac}: must be in [0, 1]")
+    if frac == 0.0:
+        return 0
+    if not cfg.ghost_parts:
+        raise ValueError("task.ghost_parts_physical needs task.ghost_parts (the parts it makes physical)")
+    if pool < 1 or not cfg.domain_rand.enabled:
+        raise ValueError(
+            "task.ghost_parts_physical draws per episode among domain-randomisation pool members: it needs "
+            "sim.per_world_scenes=true and task.domain_rand.enabled=true"
+        )
+    return round(frac * pool)
 
 
 def _make_geoms_ghost(model: mujoco.MjModel, geoms: np.ndarray) -> int:

@@ -36,8 +36,7 @@ from cat.envs.scene import (
     PART_SENSOR_PREFIX,
     build_env_model,
     foot_contact_sensor,
-    make_obstacles_ghost,
-    make_parts_ghost,
+    make_training_ghosts,
     part_obstacle_sensor,
     query_pos_sensor,
     query_vel_sensor,
@@ -103,11 +102,8 @@ class TraversalEnv(VecEnv):
             models = self.world_models.models
         else:
             models = [build_env_model(self.robot, scenes.add_to_spec if scenes is not None else None)]
-        for m in models:
-            if cfg.ghost_obstacles:
-                make_obstacles_ghost(m)
-            elif cfg.ghost_parts:
-                make_parts_ghost(m, cfg.ghost_parts)
+        # pool members (per scene) whose ghost parts stay physical
+        self._physical_members = make_training_ghosts(models, cfg, self.world_models.pool if self.world_models else 0)
         model = models[0]
         self.sim = make_backend(
             sim, model, self.num_envs, self.robot.decimation, device=device, world_models=self.world_models
@@ -219,6 +215,9 @@ class TraversalEnv(VecEnv):
             hard = torch.zeros_like(collision)
         elif self._i_hard_collision is not None:
             hard = (sens[:, self._i_hard_collision] > 0).any(dim=-1)
+            if self._physical_members:  # worlds on a physical pool member: every contact pushes
+                physical = (self.sim.model_ids[ids] % self.world_models.pool < self._physical_members).to(self.device)
+                hard = torch.where(physical, collision, hard)
         else:
             hard = collision
         return SimState(

@@ -139,7 +139,7 @@ def eval_task(task: EnvCfg, num_envs: int, cfg: EvalCfg) -> EnvCfg:
     t.domain_rand.enabled = cfg.domain_rand
     t.push.enabled = cfg.push
     t.curriculum.enabled = False
-    t.ghost_obstacles, t.ghost_parts = False, []  # training aids: trials always meet physical obstacles
+    t.ghost_obstacles, t.ghost_parts, t.ghost_parts_physical = False, [], 0.0  # training aids: trials are physical
     t.success = copy.deepcopy(cfg.success)
     t.terminations.min_base_height = cfg.fall.min_base_height
     t.terminations.max_tilt = cfg.fall.max_tilt

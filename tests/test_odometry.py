@@ -64,6 +64,20 @@ def test_zero_drift_is_field_block_exactly():
     assert plain.odometry is None and "odometry_error" not in plain.get_state()  # no cost, old snapshots valid
 
 
+def test_both_placements_of_the_block_share_one_noise_draw():
+    """A noisy group reads ``field_block`` and ``field_block_odometry`` with the same value-noise draw (one
+    reading, two placements): with zero drift the two noisy blocks are equal, and differ from the clean ones."""
+    cfg = _cfg(3, 0.0, 0.0, scene_kind="hurdle-crouch")
+    cfg.observations["noisy"] = ObsGroupCfg(terms=list(TERMS), noise=True)
+    scenes = SceneSet.typical("hurdle-crouch", num_envs=3, variants=1)
+    env = TraversalEnv(cfg, scenes=scenes, seed=2)
+    for t in range(4):
+        obs, *_ = env.step(0.2 * torch.cos(torch.arange(12.0) + t).expand(3, 12))
+        noisy, clean = obs["noisy"], obs["student"]
+        assert torch.equal(noisy[:, :K7], noisy[:, K7:]), t
+        assert 0 < (noisy - clean).abs().max() <= cfg.noise.field_block + 1e-6
+
+
 def test_random_walk_statistics():
     """The class alone, 200k envs: after T s in refresh steps the error per axis has std sigma sqrt(T)."""
     g = torch.Generator().manual_seed(0)

@@ -6,7 +6,8 @@ A group's terms are the functions of ``cat.envs.mdp.observations`` named in its 
 after the resolved terms of the group it ``extends``. Every term is evaluated once per step and shared by the
 groups that list it; groups with ``noise: true`` read it with ``NoiseCfg``'s per-term noise, drawn once per step
 and term, so every noisy group sees the same reading (one sensor, one reading: a distillation teacher with
-``noise: true`` labels from exactly what the student observes). A group with ``history: H`` > 1 reads its last
+``noise: true`` labels from exactly what the student observes); terms in ``SHARED_NOISE`` use the draw of the
+term they are another placement of. A group with ``history: H`` > 1 reads its last
 H vectors (noisy as observed), oldest first.
 """
 
@@ -27,6 +28,9 @@ if TYPE_CHECKING:
     from cat.envs.traversal_env import TraversalEnv
 
 FLIP_NOISE_TERMS = frozenset({"voxel_grid"})  # occupancy in {0, 1}: noise flips cells instead of adding to them
+# terms that are one reading placed two ways share its noise draw: the HumanoidPF block at the true links and at
+# the links as the drifting odometry places them (a teacher reading the first labels with the student's error)
+SHARED_NOISE = {"field_block_odometry": "field_block"}
 
 
 def lookup_term(module, name: str, kind: str) -> Callable:
@@ -114,6 +118,7 @@ class ObservationGroups:
         group and term order) and shared by every noisy group."""
         values: dict[str, torch.Tensor] = {}
         noisy_values: dict[str, torch.Tensor] = {}
+        draws: dict[str, torch.Tensor] = {}  # U[0, 1) per noise source (a term, or the one it shares with)
         noise = self.cfg.noise
         out = {}
         for group, terms in self.groups.items():
@@ -125,7 +130,11 @@ class ObservationGroups:
                 scale = getattr(noise, name, 0.0)
                 if self.noisy[group] and noise.enabled and scale > 0:
                     if name not in noisy_values:
-                        noisy_values[name] = _noisy(name, value, scale)
+                        source = SHARED_NOISE.get(name, name)
+                        u = draws.get(source)
+                        if u is None or u.shape != value.shape:
+                            u = draws[source] = torch.rand(value.shape, device=value.device)
+                        noisy_values[name] = _noisy(name, value, scale, u)
                     value = noisy_values[name]
                 parts.append(value)
             out[group] = self._stack(group, torch.cat(parts, dim=-1))
@@ -165,11 +174,12 @@ def noise_std(name: str, scale: float) -> float:
     return scale / math.sqrt(3.0)
 
 
-def _noisy(name: str, value: torch.Tensor, scale: float) -> torch.Tensor:
+def _noisy(name: str, value: torch.Tensor, scale: float, u: torch.Tensor) -> torch.Tensor:
+    """``value`` read with noise of ``scale`` from uniform draws ``u`` in [0, 1): U(-s, s) added, or cells
+    flipped with probability s."""
     if name in FLIP_NOISE_TERMS:
-        flip = torch.rand(value.shape, device=value.device) < scale
-        return torch.where(flip, 1.0 - value, value)
-    return value + scale * (2 * torch.rand(value.shape, device=value.device) - 1)
+        return torch.where(u < scale, 1.0 - value, value)
+    return value + scale * (2 * u - 1)
 
 
 def group_layout(task: EnvCfg, group: str = "actor") -> tuple:

@@ -24,6 +24,7 @@ from cat.envs.sim import check_backend
 from cat.envs.sim.mujoco_backend import MujocoBackend
 from cat.envs.traversal_env import TraversalEnv
 from cat.terrain import typical_variants
+from cat.terrain.mujoco_export import obstacle_geom_ids
 
 KINDS = ("side-crouch", "hurdle-pass", "hurdle-crouch")  # 3, 3 and 2 convex parts
 FREE, WALL = 0, 1  # scene indices: side-crouch is free around SPOT, hurdle-pass has its side wall there
@@ -93,8 +94,8 @@ def test_scene_with_other_state_size_is_named(scenes, robot_cfg, monkeypatch):
 
     real = sm.add_obstacles_to_spec
 
-    def with_a_door(spec, scene):  # a hinged obstacle: not static, one more dof
-        real(spec, scene)
+    def with_a_door(spec, scene, **kw):  # a hinged obstacle: not static, one more dof
+        real(spec, scene, **kw)
         if scene is scenes[1]:
             door = spec.worldbody.add_body(name="door", pos=[5, 5, 1])
             door.add_joint(type=mujoco.mjtJoint.mjJNT_HINGE)
@@ -247,7 +248,40 @@ def test_ghost_obstacles_in_every_table_model(scenes, fields):
     cfg.domain_rand.enabled, cfg.domain_rand.pool_size = True, 2
     env = TraversalEnv(cfg, scenes=SceneSet(scenes, fields, 2, per_world=True), seed=0)
     for m in env.world_models.models:  # every scene's pool member: obstacle contacts counted, no force
-        obstacle = m.geom_bodyid == m.body("obstacles").id
-        assert obstacle.any() and np.allclose(m.geom_solref[obstacle], GHOST_SOLREF)
+        obstacle = obstacle_geom_ids(m)
+        assert len(obstacle) and np.allclose(m.geom_solref[obstacle], GHOST_SOLREF)
     _place(env, [WALL, FREE])
     assert env.state.collision.tolist() == [True, False]
+
+
+def test_cell_bodies_change_no_physics(robot_cfg, monkeypatch):
+    """Obstacle geoms spread over the 4 × 4 cell bodies step exactly like the same geoms on one body (MuJoCo C),
+    and the collision sensor counts the same contacts."""
+    import cat.envs.scene_models as sm
+    from cat.envs.robot import home_qpos
+    from cat.terrain import make_procedural
+
+    scene = make_procedural(0.3, 1)  # height-field tiles and boxes, touched from this start
+    cells = sm.build_scene_models(robot_cfg, [scene])[0]
+    monkeypatch.setattr(sm, "OBSTACLE_CELLS", None)
+    one = sm.build_scene_models(robot_cfg, [scene])[0]
+    geoms = obstacle_geom_ids(cells)
+    assert len(geoms) == len(obstacle_geom_ids(one)) > 0
+    assert len(np.unique(cells.geom_bodyid[geoms])) > 4 and len(np.unique(one.geom_bodyid[obstacle_geom_ids(one)])) == 1
+    q0 = home_qpos(robot_cfg)
+    q0[:2] = (1.1, -2.8)
+    runs = []
+    for m in (cells, one):
+        d = mujoco.MjData(m)
+        d.qpos[:] = q0
+        mujoco.mj_forward(m, d)
+        rng, qs, touches = np.random.default_rng(0), [], 0
+        for _ in range(40):
+            d.ctrl[:] = q0[7:] + 0.1 * rng.uniform(size=m.nu)
+            for _ in range(robot_cfg.decimation):
+                mujoco.mj_step(m, d)
+            qs.append(d.qpos.copy())
+            touches += int(d.sensor(COLLISION_SENSOR).data[0])
+        runs.append((np.array(qs), touches))
+    assert runs[0][1] == runs[1][1] > 0  # the robot touched the obstacles, and both models counted it alike
+    np.testing.assert_allclose(runs[0][0], runs[1][0], atol=1e-10)

@@ -102,3 +102,16 @@ def test_voxel_export_offset_moves_every_geom():
     np.testing.assert_allclose(models[1][1] - models[0][1], np.tile([5.0, -3.0, 0.0], (models[0][0], 1)), atol=1e-9)
     with pytest.raises(ValueError, match="method"):
         add_obstacles_to_spec(mujoco.MjSpec(), scene, method="coacd")
+
+
+def test_tiles_are_cropped_to_their_solid():
+    """A tile's footprint is its solid's samples plus one ring of free ones, never the whole 16-voxel tile."""
+    occ = np.zeros(GRID.shape, bool)
+    occ[3:5, 9:12, :6] = True  # one small block inside the first 16×16 tile
+    (tile,) = voxel_parts(occ, GRID, VoxelCollisionCfg(tile=16)).floor
+    h = GRID.voxel
+    # solid samples span voxel faces 3..5 (x) and 9..12 (y); one free half-voxel sample on each side
+    np.testing.assert_allclose(tile.lower, [3 * h - h / 2, 9 * h - h / 2])
+    np.testing.assert_allclose(tile.size, [2 * h + h, 3 * h + h])
+    assert tile.heights.shape == (2 * 2 + 1 + 2, 2 * 3 + 1 + 2)
+    assert (tile.heights[0] == 0).all() and (tile.heights[-1] == 0).all() and (tile.heights[1:-1, 1:-1] > 0).all()

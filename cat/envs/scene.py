@@ -9,6 +9,7 @@ import mujoco
 import numpy as np
 
 from cat.envs.robot import OBSTACLE_BODY, RobotCfg, compile_model, robot_spec
+from cat.terrain.mujoco_export import obstacle_geom_ids
 
 if TYPE_CHECKING:
     from cat.envs.config import EnvCfg
@@ -47,10 +48,7 @@ def make_obstacles_ghost(model: mujoco.MjModel) -> int:
     """Obstacle contacts stay in ``mjData.contact`` (the collision sensor counts them) but carry no force worth
     the name: impedance 1e-4 and ~zero direct stiffness / damping, with a higher ``geom_priority`` so the
     obstacle's parameters, not a mix with the robot's, set each contact. Returns the number of geoms changed."""
-    body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, OBSTACLE_BODY)
-    if body < 0:
-        return 0
-    return _make_geoms_ghost(model, np.flatnonzero(model.geom_bodyid == body))
+    return _make_geoms_ghost(model, obstacle_geom_ids(model))
 
 
 def make_parts_ghost(model: mujoco.MjModel, bodies: Sequence[str]) -> int:
@@ -162,11 +160,11 @@ def env_spec(
     for foot in robot.feet:
         _contact_count_sensor(spec, foot_contact_sensor(foot), (body, foot), (geom, "floor"))
     if spec.body(OBSTACLE_BODY) is not None:
-        _contact_count_sensor(spec, COLLISION_SENSOR, (xbody, robot.root_body), (body, OBSTACLE_BODY))
+        _contact_count_sensor(spec, COLLISION_SENSOR, (xbody, robot.root_body), (xbody, OBSTACLE_BODY))
         wanted = set(robot.collision_geoms)
         for part in spec.bodies:  # every robot body with a collision geom
             if any(g.name in wanted for g in part.geoms):
-                _contact_count_sensor(spec, part_obstacle_sensor(part.name), (body, part.name), (body, OBSTACLE_BODY))
+                _contact_count_sensor(spec, part_obstacle_sensor(part.name), (body, part.name), (xbody, OBSTACLE_BODY))
     return spec
 
 

@@ -2,7 +2,11 @@
 
 Collision convention (shared with ``cat.envs.robot``, duplicated here so terrain does not import envs; a
 test checks they agree): obstacles have ``contype = 0``, ``conaffinity = OBSTACLE_BIT``, ``condim = 3``
-and all hang on one static body ``OBSTACLE_BODY``, a child of the world body.
+and all hang on one static body ``OBSTACLE_BODY``, a child of the world body, or on static children of it
+(``cells``: one per cell of a grid over the scene's floor plan). MuJoCo's collision broad phase prunes by body
+before it walks a body's tree of geom boxes, so cells keep limbs away from most of a scene's geoms at the price
+of one cheap box test per cell (docs/benchmarks.md, "Physics with obstacles"). :func:`obstacle_geom_ids` finds
+the obstacle geoms either way.
 
 Scenes made of voxels (procedural obstacles, re-meshed crops: :func:`uses_voxels`) get their collision
 geometry from the occupancy grid the fields are built from (``cat.terrain.voxel_collision``: height-field
@@ -28,7 +32,7 @@ import trimesh
 
 from cat.terrain.scene import Scene, SceneError
 from cat.terrain.voxel import GridSpec
-from cat.terrain.voxel_collision import VoxelCollisionCfg, add_voxel_parts_to_spec, voxel_parts
+from cat.terrain.voxel_collision import VoxelCollisionCfg, VoxelParts, add_voxel_parts_to_spec, voxel_parts
 
 log = logging.getLogger(__name__)
 
@@ -123,13 +127,17 @@ def add_obstacles_to_spec(
     offset=(0.0, 0.0, 0.0),
     voxel_cfg: VoxelCollisionCfg | None = None,
     method: str = "auto",
+    cells: tuple[int, int] | None = None,
 ) -> int:
     """Add the obstacles, moved by ``offset``, as geoms of a static world child ``body_name``; returns the
     geom count.
 
     ``scene_or_parts`` is a scene (voxel height fields and boxes when :func:`uses_voxels`, else convex parts),
     a mesh (decomposed by ``convex_parts``) or a list of convex parts. ``method="convex"`` forces convex
-    parts for a voxel scene, ``"voxel"`` voxel geometry for any scene.
+    parts for a voxel scene, ``"voxel"`` voxel geometry for any scene. ``cells=(nx, ny)``: the geoms go to
+    ``nx * ny`` static children of ``body_name`` (``<body_name>_cell_<k>``, all of them made, empty or not, so
+    every scene gets the same bodies), each holding the geoms whose centre lies in its cell of the scene's
+    floor plan (its bounds; the parts' bounds for meshes and part lists).
     """
     if method not in ("auto", "voxel", "convex"):
         raise ValueError(f"method must be 'auto', 'voxel' or 'convex', got {method!r}")
@@ -142,8 +150,12 @@ def add_obstacles_to_spec(
         g = scene_or_parts.grid()
         grid = GridSpec(tuple(float(v) for v in np.asarray(g.origin) + off), g.voxel, g.shape)
         vparts = voxel_parts(scene_or_parts.occupancy(), grid, voxel_cfg)
+        plan = _CellBodies(spec, body, cells, scene_or_parts.bounds[:, :2] + off[:2])
         prefix = f"{body_name}_{len(spec.geoms)}_"
-        return add_voxel_parts_to_spec(spec, vparts, body, prefix, conaffinity, rgba, voxel_cfg)
+        n = 0
+        for k, cell in plan.split_voxel_parts(vparts):
+            n += add_voxel_parts_to_spec(spec, cell, plan.bodies[k], f"{prefix}{k}_", conaffinity, rgba, voxel_cfg)
+        return n
     if isinstance(scene_or_parts, Scene):
         parts = convex_parts(scene_or_parts.mesh, cfg, cache)
     elif isinstance(scene_or_parts, trimesh.Trimesh):
@@ -152,6 +164,14 @@ def add_obstacles_to_spec(
         parts = list(scene_or_parts)
     if np.any(off != 0.0):
         parts = [p.copy().apply_translation(off) for p in parts]
+    if is_scene:
+        plan_xy = scene_or_parts.bounds[:, :2] + off[:2]
+    elif parts:
+        corners = np.array([p.bounds[:, :2] for p in parts])
+        plan_xy = np.array([corners[:, 0].min(axis=0), corners[:, 1].max(axis=0)])
+    else:
+        plan_xy = np.zeros((2, 2))
+    plan = _CellBodies(spec, body, cells, plan_xy)
     prefix = f"{body_name}_{len(spec.meshes)}_"
     n = 0
     for part in parts:
@@ -162,7 +182,7 @@ def add_obstacles_to_spec(
             continue
         name = f"{prefix}{n}"
         spec.add_mesh(name=name, uservert=hull.vertices.ravel().tolist(), userface=hull.faces.ravel().tolist())
-        body.add_geom(
+        plan.body_at(hull.bounds.mean(axis=0)).add_geom(
             name=name,
             type=mujoco.mjtGeom.mjGEOM_MESH,
             meshname=name,
@@ -174,3 +194,57 @@ def add_obstacles_to_spec(
         )
         n += 1
     return n
+
+
+class _CellBodies:
+    """The static bodies obstacle geoms go to: ``body`` itself, or one child per cell of an ``nx × ny`` grid over
+    the floor plan ``plan_xy`` ((2, 2) lower / upper corner; centres outside go to the nearest cell)."""
+
+    def __init__(self, spec: mujoco.MjSpec, body: mujoco.MjsBody, cells: tuple[int, int] | None, plan_xy: np.ndarray):
+        self.cells = None if cells is None else (int(cells[0]), int(cells[1]))
+        if self.cells is not None and min(self.cells) < 1:
+            raise ValueError(f"cells must be two positive counts, got {cells}")
+        self.lo = np.asarray(plan_xy[0], dtype=np.float64)
+        self.span = np.maximum(np.asarray(plan_xy[1], dtype=np.float64) - self.lo, 1e-9)
+        if self.cells is None:
+            self.bodies = [body]
+        else:
+            self.bodies = [body.add_body(name=f"{body.name}_cell_{k}") for k in range(self.cells[0] * self.cells[1])]
+
+    def index(self, centre) -> int:
+        if self.cells is None:
+            return 0
+        ij = np.floor((np.asarray(centre, dtype=np.float64)[:2] - self.lo) / self.span * self.cells).astype(int)
+        i, j = np.clip(ij, 0, np.array(self.cells) - 1)
+        return int(i) * self.cells[1] + int(j)
+
+    def body_at(self, centre) -> mujoco.MjsBody:
+        return self.bodies[self.index(centre)]
+
+    def split_voxel_parts(self, parts: VoxelParts) -> list[tuple[int, VoxelParts]]:
+        """``parts`` split by cell (tiles by their centre, boxes by theirs); cells with nothing are left out."""
+        groups: dict[int, VoxelParts] = {}
+
+        def group(k: int) -> VoxelParts:
+            return groups.setdefault(k, VoxelParts([], [], np.zeros((0, 2, 3)), parts.floor_z, parts.top_z))
+
+        for t in parts.floor:
+            group(self.index(t.lower + t.size / 2)).floor.append(t)
+        for t in parts.ceiling:
+            group(self.index(t.lower + t.size / 2)).ceiling.append(t)
+        for b in parts.boxes:
+            g = group(self.index(b.mean(axis=0)))
+            g.boxes = np.concatenate([g.boxes, b[None]])
+        return sorted(groups.items())
+
+
+def obstacle_geom_ids(model: mujoco.MjModel, body_name: str = OBSTACLE_BODY) -> np.ndarray:
+    """Geom ids on ``body_name`` and its descendants (its cell bodies); empty when there is no such body."""
+    root = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, body_name)
+    if root < 0:
+        return np.zeros(0, dtype=np.int64)
+    inside = np.zeros(model.nbody, dtype=bool)
+    inside[root] = True
+    for b in range(root + 1, model.nbody):  # MuJoCo numbers a body after its parent
+        inside[b] = inside[model.body_parentid[b]]
+    return np.flatnonzero(inside[model.geom_bodyid])

@@ -149,10 +149,15 @@ def _tiles(heights: np.ndarray, grid: GridSpec, tile: int) -> list[HeightTile]:
         for j0 in range(0, ny, tile):
             i1, j1 = min(i0 + tile, nx), min(j0 + tile, ny)
             block = s[2 * i0 : 2 * i1 + 1, 2 * j0 : 2 * j1 + 1]
-            if block.max() <= 0.0:
+            solid = np.argwhere(block > 0.0)
+            if not len(solid):
                 continue
-            size = np.array([i1 - i0, j1 - j0], dtype=np.float64) * h
-            out.append(HeightTile(org + np.array([i0, j0]) * h, size, block.copy()))
+            # crop to the solid and one ring of zero samples (the foot of its slope): the same surface, and a
+            # bounding box that hugs it, so limbs over the free floor of the tile are not tested against it
+            lo = np.maximum(solid.min(axis=0) - 1, 0)
+            hi = np.minimum(solid.max(axis=0) + 2, block.shape)
+            lower = org + (2 * np.array([i0, j0]) + lo) * (h / 2)
+            out.append(HeightTile(lower, (hi - lo - 1) * (h / 2), block[lo[0] : hi[0], lo[1] : hi[1]].copy()))
     return out
 
 

@@ -34,6 +34,7 @@ import torch
 from cat.envs.robot import OBSTACLE_BODY, RobotCfg, robot_spec
 from cat.envs.scene import env_spec, strip_visual_meshes
 from cat.envs.scene_models import PAD_BODY, SceneModelError, check_compatible
+from cat.terrain.mujoco_export import obstacle_geom_ids
 
 log = logging.getLogger(__name__)
 
@@ -81,6 +82,7 @@ class SlotTable:
         firsts = [table[model_uniq.index(u)] for u in range(len(uniq))]
         obstacles = [_obstacle_geoms(m, f"table model {model_uniq.index(u)}") for u, m in enumerate(firsts)]
         props = _shared_props(table)
+        cell_names = _cell_bodies(table[0])
         assets = _Assets()
         cat_spec, entries = _catalogue_spec(firsts, obstacles, assets)
         cat_body = cat_spec.body(OBSTACLE_BODY)
@@ -94,6 +96,8 @@ class SlotTable:
         def add_slots(spec: mujoco.MjSpec) -> None:
             assets.add_to(spec)
             body = spec.worldbody.add_body(name=OBSTACLE_BODY)
+            for cell in cell_names:  # the scene models' (empty here) cell bodies, so the bodies match by index
+                body.add_body(name=cell)
             for t in KINDS:
                 for k in range(counts[KINDS[t]]):
                     _add_slot(body, t, assets, name=f"slot_{KINDS[t]}_{k}")
@@ -177,16 +181,19 @@ def _add_slot(body: mujoco.MjsBody, geom_type: int, assets: _Assets, name: str =
 
 def _obstacle_geoms(m: mujoco.MjModel, name: str) -> np.ndarray:
     """Geom ids of ``m``'s obstacle body; raises :class:`SlotError` on a kind the slots do not cover."""
-    b = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, OBSTACLE_BODY)
-    if b < 0:
-        return np.zeros(0, dtype=np.int64)
-    if m.body_weldid[b] != 0:
+    geoms = obstacle_geom_ids(m)
+    if (m.body_weldid[m.geom_bodyid[geoms]] != 0).any():
         raise SlotError(f"{name}: the {OBSTACLE_BODY!r} body moves; slots need static obstacles")
-    geoms = np.flatnonzero(m.geom_bodyid == b)
     bad = sorted({mujoco.mjtGeom(t).name for t in m.geom_type[geoms] if int(t) not in KINDS})
     if bad:
         raise SlotError(f"{name}: obstacle geom types {bad} have no warp slots (mesh, box, hfield only)")
     return geoms
+
+
+def _cell_bodies(m: mujoco.MjModel) -> list[str]:
+    """Names of the obstacle body's children (its cells, ``add_obstacles_to_spec(cells=...)``), in order."""
+    root = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, OBSTACLE_BODY)
+    return [m.body(b).name for b in range(root + 1, m.nbody) if root >= 0 and m.body_parentid[b] == root]
 
 
 def _shared_props(table: Sequence[mujoco.MjModel]) -> dict[str, np.ndarray]:
@@ -221,7 +228,7 @@ def _geometry_key(m: mujoco.MjModel) -> str:
     """Hash of a model's obstacle geometry (pool members of one scene share it)."""
     h = hashlib.sha1()
     b = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, OBSTACLE_BODY)
-    geoms = np.flatnonzero(m.geom_bodyid == b) if b >= 0 else []
+    geoms = obstacle_geom_ids(m)
     if b >= 0:
         h.update(m.body_pos[b].tobytes() + m.body_quat[b].tobytes())
     for g in geoms:

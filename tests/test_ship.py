@@ -7,9 +7,9 @@ from pathlib import Path
 import pytest
 import torch
 
+from cat.cli import run
 from cat.learning.runs import CheckpointError
-from cat.learning.ship import ShipCfg, ship
-from scripts.ship import main
+from cat.learning.ship import SCRIPT, ShipCfg, ship
 
 
 def _run(tmp_path: Path, it: int = 40) -> Path:
@@ -61,6 +61,6 @@ def test_ship_refusals_leave_out_unchanged(tmp_path, capsys):
     assert [p.name for p in out.iterdir()] == ["model_9000.pt"]
     with pytest.raises(CheckpointError, match="not found"):
         ship(ShipCfg(checkpoint=str(tmp_path / "run" / "model_1.pt"), out=str(out)))
-    assert main([f"checkpoint={src.parent}", f"out={out}", "force=true"]) == 0  # the run folder's latest model
+    assert run(SCRIPT, [f"checkpoint={src.parent}", f"out={out}", "force=true"]) == 0  # the run folder's latest model
     assert sorted(p.name for p in out.iterdir()) == ["config.yaml", "env_40.pt", "metrics.csv", "model_40.pt"]
     assert "wrote" in capsys.readouterr().out

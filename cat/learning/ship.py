@@ -12,7 +12,6 @@ folder first: a refused or failed ship leaves ``out`` as it was.
 
 from __future__ import annotations
 
-import logging
 import shutil
 import tempfile
 from dataclasses import dataclass
@@ -22,8 +21,6 @@ import torch
 
 from cat.cli import Script, dataclass_loader
 from cat.learning.runs import CheckpointError, env_snapshot_path, read_checkpoint, resolve_checkpoint
-
-log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -79,8 +76,6 @@ def ship(cfg: ShipCfg) -> list[Path]:
         for path in sorted(stage.iterdir()):
             shutil.move(str(path), out / path.name)
             written.append(out / path.name)
-    for path in written:
-        log.info("shipped %s (%.2f MB)", path, path.stat().st_size / 2**20)
     return written
 
 

@@ -223,19 +223,18 @@ class _CellBodies:
 
     def split_voxel_parts(self, parts: VoxelParts) -> list[tuple[int, VoxelParts]]:
         """``parts`` split by cell (tiles by their centre, boxes by theirs); cells with nothing are left out."""
-        groups: dict[int, VoxelParts] = {}
-
-        def group(k: int) -> VoxelParts:
-            return groups.setdefault(k, VoxelParts([], [], np.zeros((0, 2, 3)), parts.floor_z, parts.top_z))
-
+        groups: dict[int, tuple[list, list, list]] = {}
         for t in parts.floor:
-            group(self.index(t.lower + t.size / 2)).floor.append(t)
+            groups.setdefault(self.index(t.lower + t.size / 2), ([], [], []))[0].append(t)
         for t in parts.ceiling:
-            group(self.index(t.lower + t.size / 2)).ceiling.append(t)
+            groups.setdefault(self.index(t.lower + t.size / 2), ([], [], []))[1].append(t)
         for b in parts.boxes:
-            g = group(self.index(b.mean(axis=0)))
-            g.boxes = np.concatenate([g.boxes, b[None]])
-        return sorted(groups.items())
+            groups.setdefault(self.index(b.mean(axis=0)), ([], [], []))[2].append(b)
+        z = (parts.floor_z, parts.top_z)
+        return [
+            (k, VoxelParts(floor, ceiling, np.asarray(boxes, dtype=np.float64).reshape(-1, 2, 3), *z))
+            for k, (floor, ceiling, boxes) in sorted(groups.items())
+        ]
 
 
 def obstacle_geom_ids(model: mujoco.MjModel, body_name: str = OBSTACLE_BODY) -> np.ndarray:

@@ -193,7 +193,9 @@ def _obstacle_geoms(m: mujoco.MjModel, name: str) -> np.ndarray:
 def _cell_bodies(m: mujoco.MjModel) -> list[str]:
     """Names of the obstacle body's children (its cells, ``add_obstacles_to_spec(cells=...)``), in order."""
     root = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, OBSTACLE_BODY)
-    return [m.body(b).name for b in range(root + 1, m.nbody) if root >= 0 and m.body_parentid[b] == root]
+    if root < 0:
+        return []
+    return [m.body(b).name for b in range(root + 1, m.nbody) if m.body_parentid[b] == root]
 
 
 def _shared_props(table: Sequence[mujoco.MjModel]) -> dict[str, np.ndarray]:

@@ -12,7 +12,7 @@ import torch
 from cat.envs.config import ACTOR_TERMS, EnvCfg, ObsGroupCfg
 from cat.learning.config import AlgoCfg, DistillCfg, TrainCfg, policy_model
 from cat.learning.distill import MultiTeacher, TeacherError, check_teachers, load_specialists
-from cat.learning.runs import load_policy, make_env, resume_config, save_config, train
+from cat.learning.runs import load_policy, make_env, make_runner, resume_config, save_config, train, validate_train_cfg
 
 KINDS = ["hurdle-crouch", "side-pass"]
 
@@ -169,3 +169,42 @@ def test_distillation_resumes_in_its_own_folder(teachers, tmp_path):
     assert its == [0, 1, 2, 3]  # the iteration count continues
     history = torch.load(run / "env_3.pt", weights_only=False)["obs_history"]
     assert set(history) == {"student_proprio"}  # the student's observation history travels with the snapshot
+
+
+@pytest.mark.parametrize("prob", [0.0, 0.5, 1.0])
+def test_teacher_driven_episodes_act_with_the_teachers_labels(env, teachers, prob):
+    """DAgger's mixing: a teacher-driven env acts with its teacher's label (+-0.5 here), a student-driven one with
+    the student's own action; the driver is drawn again for exactly the envs that reset."""
+    cfg = _generalist_cfg(teachers)
+    cfg.algo.distill.teacher_drive_prob = prob
+    alg = make_runner(cfg, env, None).alg
+    obs = env.get_observations()
+    torch.manual_seed(0)
+    actions = alg.act(obs)
+    drives = alg.teacher_drives if prob > 0 else torch.zeros(env.num_envs, dtype=torch.bool)
+    assert torch.equal(actions[drives], alg.transition.privileged_actions[drives])
+    assert torch.equal(actions[~drives], alg.transition.actions[~drives])
+    assert not torch.allclose(alg.transition.actions, alg.transition.privileged_actions)  # labels != student
+    if prob == 1.0:
+        assert drives.all()
+    if prob == 0.5:
+        before = drives.clone()
+        dones = torch.zeros(env.num_envs)
+        dones[:3] = 1
+        draws = [before]
+        for _ in range(20):  # envs that do not reset keep their driver; the reset ones are drawn anew
+            alg.act(obs)
+            alg.process_env_step(obs, torch.zeros(env.num_envs), dones, {})
+            alg.storage.clear()
+            assert torch.equal(alg.teacher_drives[3:], before[3:])
+            draws.append(alg.teacher_drives[:3].clone())
+        assert len({tuple(d.tolist()) for d in draws}) > 1
+
+
+def test_teacher_drive_prob_out_of_range_is_refused(env, teachers):
+    cfg = _generalist_cfg(teachers)
+    cfg.algo.distill.teacher_drive_prob = 1.5
+    with pytest.raises(ValueError, match="teacher_drive_prob must be in"):
+        validate_train_cfg(cfg)  # before any env is built
+    with pytest.raises(ValueError, match="teacher_drive_prob must be in"):
+        make_runner(cfg, env, None)

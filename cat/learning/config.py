@@ -37,6 +37,10 @@ class DistillCfg:
     gradient_length: int = 24  # steps of truncated backprop per gradient step (divides epochs x num_steps_per_env)
     loss_type: str = "mse"  # mse | huber
     max_grad_norm: float = 1.0
+    # DAgger's mixing (beta): each episode is driven by its teacher with this probability (drawn per env at every
+    # reset), by the student otherwise; every step is labelled and learned from either way. Teacher-driven
+    # episodes reach the states behind a hard passage that a still-failing student ends its episodes before.
+    teacher_drive_prob: float = 0.0
     student_groups: list[str] = field(default_factory=lambda: ["student"])
     teacher_groups: list[str] = field(default_factory=lambda: ["teacher"])
     route_group: str = "route"

@@ -164,7 +164,33 @@ class MultiTeacher(nn.Module):
 
 
 class MultiTeacherDistillation(Distillation):
-    """rsl_rl ``Distillation`` whose checkpoints hold the student (and optimiser) only."""
+    """rsl_rl ``Distillation`` whose checkpoints hold the student (and optimiser) only, with DAgger's mixing:
+    an episode is driven by the teacher with probability ``teacher_drive_prob`` (drawn per env at each reset);
+    every step, whoever drove it, is stored with the teacher's label."""
+
+    def __init__(self, *args, teacher_drive_prob: float = 0.0, **kwargs):
+        super().__init__(*args, **kwargs)
+        if not 0.0 <= teacher_drive_prob <= 1.0:
+            raise ValueError(f"algo.distill.teacher_drive_prob must be in [0, 1], got {teacher_drive_prob}")
+        self.teacher_drive_prob = teacher_drive_prob
+        self.teacher_drives: torch.Tensor | None = None  # (num_envs,) bool, drawn at the first step and each reset
+
+    def _draw_drivers(self, n: int) -> torch.Tensor:
+        return torch.rand(n, device=self.device) < self.teacher_drive_prob
+
+    def act(self, obs: TensorDict) -> torch.Tensor:
+        actions = super().act(obs)
+        if self.teacher_drive_prob <= 0.0:
+            return actions
+        if self.teacher_drives is None:
+            self.teacher_drives = self._draw_drivers(actions.shape[0])
+        return torch.where(self.teacher_drives[:, None], self.transition.privileged_actions, actions)
+
+    def process_env_step(self, obs: TensorDict, rewards, dones, extras) -> None:
+        super().process_env_step(obs, rewards, dones, extras)
+        if self.teacher_drives is not None:
+            done = dones.bool().view(-1)
+            self.teacher_drives[done] = self._draw_drivers(int(done.sum()))
 
     def save(self) -> dict:
         return {
@@ -200,6 +226,7 @@ def distill_runner_cfg(cfg: TrainCfg, group_names: list[str]) -> dict:
             "learning_rate": d.learning_rate,
             "max_grad_norm": d.max_grad_norm,
             "loss_type": d.loss_type,
+            "teacher_drive_prob": d.teacher_drive_prob,
         },
         "student": student_model_cfg(d, algo.activation, algo.obs_normalization),
         "teacher": {

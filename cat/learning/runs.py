@@ -177,6 +177,8 @@ def validate_train_cfg(cfg: TrainCfg) -> None:
                 f"algo.distill.route_group={d.route_group!r} must be an observation group of exactly the "
                 "scene_group term (task.observations)"
             )
+        if not 0.0 <= d.teacher_drive_prob <= 1.0:
+            raise ValueError(f"algo.distill.teacher_drive_prob must be in [0, 1], got {d.teacher_drive_prob}")
         if not cfg.teachers:
             raise ValueError("algo=distill needs teachers=[<specialist checkpoint>,...]")
         if cfg.init:

@@ -2,8 +2,8 @@
 
 Optional: ``record=rollout.rrd`` (rerun replay of world 0), ``seed=`` (start poses), ``scene_seed=`` /
 ``scene_dir=`` (other scenes than the run's), ``mirror=true`` (their left/right mirror images), ``sim=``,
-``num_envs=``. Prints one line:
-``episodes=<n> success_rate=<x> distance_error=<m> collision_rate=<x> fall_rate=<x>``.
+``num_envs=``, ``by_scene=true`` (first one line per scene: ``scene=<i> kind=<k> difficulty=<d> episodes=...``).
+Prints one line: ``episodes=<n> success_rate=<x> distance_error=<m> collision_rate=<x> fall_rate=<x>``.
 """
 
 from __future__ import annotations
@@ -12,12 +12,16 @@ import sys
 
 from cat.cli import Script, dataclass_loader, run
 from cat.envs.scene_set import SceneSetError
-from cat.learning.play import PlayCfg, play
+from cat.eval.metrics import summarize
+from cat.learning.play import PlayCfg, play_trials, scene_lines
 from cat.learning.runs import CheckpointError
 
 
 def _job(cfg: PlayCfg) -> int:
-    print(play(cfg).line())
+    trials, results, scenes = play_trials(cfg)
+    if cfg.by_scene:
+        print("\n".join(scene_lines(trials, results, scenes)))
+    print(summarize(results).line())
     return 0
 
 

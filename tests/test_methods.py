@@ -5,6 +5,7 @@ analytic scene, and every method training for one iteration, loading and playing
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -15,9 +16,11 @@ import yaml
 from cat.envs.field_source import FieldSample
 from cat.envs.mdp import rewards as rew
 from cat.eval.manifest import ManifestError, load_manifest
+from cat.eval.metrics import TrialResult, summarize
 from cat.learning.hydra_cfg import ConfigError, load_config
-from cat.learning.play import PlayCfg, play
+from cat.learning.play import PlayCfg, play, play_trials, scene_lines
 from cat.learning.runs import load_run_config, make_env, resume_config, train
+from cat.terrain.typical import make_typical
 
 METHODS = ("ours", "wo_obs_field", "wo_r_field", "astraversal", "humanoid_parkour")
 FIELD_FREE_REWARD = ("wo_r_field", "astraversal", "humanoid_parkour")
@@ -156,3 +159,18 @@ def test_manifest_rejects_a_row_mixing_observation_layouts(method_runs, tmp_path
     (tmp_path / "bad.yaml").write_text(yaml.safe_dump(bad))
     with pytest.raises(ManifestError, match=f"checkpoint {method_runs['wo_obs_field']} observation layout"):
         load_manifest(tmp_path / "bad.yaml")
+
+
+def test_play_by_scene_lines_add_up_to_the_summary(method_runs):
+    """play.py by_scene=true: one line per scene, each the summary of that scene's own trials."""
+    trials, results, scenes = play_trials(PlayCfg(checkpoint=str(method_runs["ours"]), episodes=3, time_s=0.5))
+    assert len(scenes) == 1 and scenes[0].kind == "hurdle-crouch"  # the run's one variant; a second one by hand:
+    other = make_typical("crouch-pass", 0.75, seed=3)
+    trials = trials + [replace(trials[0], scene=1)]
+    results = results + [TrialResult(success=True, de=0.02, collided=False, fell=False, reach_time=1.0)]
+    lines = scene_lines(trials, results, [scenes[0], other])
+    assert (
+        lines[0] == f"scene=0 kind=hurdle-crouch difficulty={scenes[0].difficulty:.2f} {summarize(results[:3]).line()}"
+    )
+    assert lines[1] == f"scene=1 kind=crouch-pass difficulty=0.75 {summarize(results[3:]).line()}"
+    assert len(lines) == 2

@@ -14,10 +14,11 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from cat.eval.metrics import Summary, summarize
+from cat.eval.metrics import Summary, TrialResult, summarize
 from cat.eval.runner import EvalCfg, make_eval_env, run_scene_group, run_trials
-from cat.eval.trials import first_trials, flat_trials, scene_trials
+from cat.eval.trials import Trial, first_trials, flat_trials, scene_trials
 from cat.learning.runs import load_policy, load_run_config, resolve_checkpoint
+from cat.terrain.scene import Scene
 
 log = logging.getLogger(__name__)
 
@@ -35,10 +36,26 @@ class PlayCfg:
     mirror: bool = False  # evaluate on the left/right mirror images of the scenes (a lateralised policy shows)
     time_s: float = 5.0  # trial length (paper: 5 s); e.g. 20 to measure falls over a whole flat episode
     record: str = ""  # .rrd path: record world 0 of the rollout for rerun replay (`rerun <file>`)
+    by_scene: bool = False  # scripts/play.py also prints one line per evaluated scene (where a policy fails)
 
 
 def play(cfg: PlayCfg) -> Summary:
     """``cfg.checkpoint`` may be a run folder: its latest checkpoint plays."""
+    return summarize(play_trials(cfg)[1])
+
+
+def scene_lines(trials: list[Trial], results: list[TrialResult], scenes: list[Scene] | None) -> list[str]:
+    """One line per evaluated scene: ``scene=<i> kind=<k> difficulty=<d>`` and its trials' summary."""
+    lines = []
+    for i in sorted({t.scene for t in trials}):
+        own = [r for t, r in zip(trials, results, strict=True) if t.scene == i]
+        kind, d = (scenes[i].kind, float(scenes[i].difficulty)) if scenes is not None else ("flat", 0.0)
+        lines.append(f"scene={i} kind={kind} difficulty={d:.2f} {summarize(own).line()}")
+    return lines
+
+
+def play_trials(cfg: PlayCfg) -> tuple[list[Trial], list[TrialResult], list[Scene] | None]:
+    """The trials of ``play``, their results in order, and the evaluated scenes (``None`` on flat ground)."""
     cfg = replace(cfg, checkpoint=str(resolve_checkpoint(cfg.checkpoint)))
     run_cfg = load_run_config(cfg.checkpoint)
     task = run_cfg.task
@@ -80,4 +97,4 @@ def play(cfg: PlayCfg) -> Summary:
         results = run_trials(env, policy, trials, seed=cfg.seed, progress=bar, on_step=on_step)
     if cfg.record:
         recorder.close()
-    return summarize(results)
+    return trials, results, (list(group.scenes) if group is not None else None)

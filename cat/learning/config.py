@@ -70,6 +70,9 @@ class AlgoCfg:
     activation: str = "elu"
     init_noise_std: float = 0.3  # actions are increments of PD targets (0.5 rad per unit): keep early noise small
     obs_normalization: bool = True
+    # iterations at the start of the run in which PPO trains the critic only (actor frozen, fixed rate): a new
+    # critic under a trained actor (init= a distilled student, cat/learning/finetune.py) first learns its values
+    critic_warmup_iterations: int = 0
     save_interval: int = 50
     symmetry_augment: bool = False  # add left/right mirrored samples to every PPO mini-batch (cat.envs.symmetry)
     mirror_loss_coeff: float = 0.0  # > 0: also penalise disagreement between the policy and its mirror image

@@ -20,6 +20,12 @@ from cat.envs.sim import check_backend
 from cat.envs.traversal_env import TraversalEnv
 from cat.learning.config import ALGOS, TrainCfg, check_obs_groups, policy_model, runner_cfg, student_model_cfg
 from cat.learning.distill import check_teachers, distill_runner_cfg, load_specialists
+from cat.learning.finetune import (
+    check_actor_matches_student,
+    install_critic_warmup,
+    is_student_checkpoint,
+    load_student_as_actor,
+)
 from cat.learning.progress import BudgetReached, install_iteration_hook, quiet_constructor
 from cat.learning.rerun_writer import prune_metrics
 from cat.learning.warm_start import adapt_to_new_inputs
@@ -136,7 +142,12 @@ def validate_train_cfg(cfg: TrainCfg) -> None:
     for key, value in counts.items():
         if value < 1:
             raise ValueError(f"{key}={value}: must be >= 1")
-    for key, value in {"max_minutes": cfg.max_minutes, "torch_threads": cfg.torch_threads}.items():
+    nonnegative = {
+        "max_minutes": cfg.max_minutes,
+        "torch_threads": cfg.torch_threads,
+        "algo.critic_warmup_iterations": cfg.algo.critic_warmup_iterations,
+    }
+    for key, value in nonnegative.items():
         if value < 0:
             raise ValueError(f"{key}={value}: must be >= 0 (0 = off / default)")
     if cfg.task.scene_kind:
@@ -191,7 +202,9 @@ def validate_train_cfg(cfg: TrainCfg) -> None:
     # a resumed run's init= is history (its weights are in the checkpoint): only the file to read is checked
     path = cfg.resume or cfg.init
     if path:
-        read_checkpoint(path)
+        ckpt = read_checkpoint(path)
+        if not cfg.resume and is_student_checkpoint(ckpt):
+            check_actor_matches_student(cfg, load_run_config(path), str(path))
 
 
 def save_config(cfg: TrainCfg, run_dir: Path) -> None:
@@ -361,6 +374,9 @@ def _train_in(cfg: TrainCfg, env: TraversalEnv, run_dir: Path) -> Path:
         if dropped:
             log.info("metrics.csv: dropped %d rows logged after the checkpoint (redone now)", dropped)
         log.info("resumed %s at iteration %d", cfg.resume, runner.current_learning_iteration)
+    elif cfg.init and is_student_checkpoint(ckpt := read_checkpoint(cfg.init)):
+        # the student knows its inputs: nothing to adapt (finetune.py)
+        load_student_as_actor(runner, ckpt, cfg.init, cfg.algo.init_noise_std)
     elif cfg.init:
         runner.load(cfg.init, load_cfg={"actor": True, "critic": True}, strict=True)
         runner.current_learning_iteration = 0
@@ -373,6 +389,8 @@ def _train_in(cfg: TrainCfg, env: TraversalEnv, run_dir: Path) -> Path:
         )
         return run_dir
     _save_with_state(runner, env, cfg, runner.save)
+    if cfg.algo.name == "ppo" and cfg.algo.critic_warmup_iterations > 0:
+        install_critic_warmup(runner, cfg.algo.critic_warmup_iterations, cfg.algo.learning_rate)
     install_iteration_hook(runner, cfg.max_iterations, cfg.max_minutes, cfg.verbose)
     try:
         with quiet_constructor(cfg.verbose):  # rsl_rl's "Storing git diff" lines

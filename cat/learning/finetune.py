@@ -1,0 +1,111 @@
+"""PPO fine-tuning of a distilled student (``algo=ppo_student init=<distillation checkpoint>``).
+
+DAgger copies its teachers only where the student's own states resemble theirs: contact ends an episode, so a
+student that touches the first wall of a hard passage is never taught what lies behind it (docs/distillation.md).
+PPO on the student's own observations optimises the task itself. The student's network becomes PPO's actor
+(same rsl_rl ``MLPModel``, same observation groups); the critic is new, reads the privileged groups, and learns
+alone for ``algo.critic_warmup_iterations`` first: advantages from an untrained critic are noise, and a PPO step
+on noise moves a trained actor away from what it learned.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from pathlib import Path
+
+import torch
+from rsl_rl.runners import OnPolicyRunner
+
+from cat.learning.config import TrainCfg, student_model_cfg
+
+log = logging.getLogger(__name__)
+
+
+def is_student_checkpoint(ckpt: dict) -> bool:
+    """A distillation checkpoint: it holds a student and no PPO actor."""
+    return "student_state_dict" in ckpt and "actor_state_dict" not in ckpt
+
+
+def check_actor_matches_student(cfg: TrainCfg, student_cfg: TrainCfg, path: str) -> None:
+    """PPO's actor must be the student's network on the student's groups (one-line ``ValueError`` saying which
+    override makes it so)."""
+    d = student_cfg.algo.distill
+    if d.student != "mlp":
+        raise ValueError(f"init={path}: a {d.student} student cannot initialise PPO's actor (an MLPModel)")
+    actor = cfg.algo
+    wanted = {
+        "algo.actor_hidden_dims": (list(actor.actor_hidden_dims), list(d.hidden_dims)),
+        "algo.obs_groups.actor": (list(actor.obs_groups.get("actor", [])), list(d.student_groups)),
+        "algo.activation": (actor.activation, student_cfg.algo.activation),
+        "algo.obs_normalization": (actor.obs_normalization, student_cfg.algo.obs_normalization),
+    }
+    for key, (have, need) in wanted.items():
+        if have != need:
+            raise ValueError(f"init={path} is a distilled student: PPO's actor needs {key}={need} (got {have})")
+    student_model_cfg(d)  # the student's class config is valid
+
+
+def load_student_as_actor(runner: OnPolicyRunner, ckpt: dict, path: str, noise_std: float) -> None:
+    """Copy the student's weights (normaliser, MLP) into PPO's actor, with action noise ``noise_std``; the critic
+    stays untrained. The student's own std is DAgger's fixed acting noise (``algo.distill.init_noise_std``), never
+    learned, so PPO's exploration is set here (``algo.init_noise_std``)."""
+    actor = runner.alg.actor
+    try:
+        actor.load_state_dict(ckpt["student_state_dict"], strict=True)
+    except RuntimeError as err:
+        first = str(err).splitlines()[0]
+        raise ValueError(f"init={path}: the student does not fit PPO's actor ({first})") from err
+    dist = actor.distribution
+    with torch.no_grad():
+        if dist.std_type == "log":
+            dist.log_std_param.fill_(math.log(noise_std))
+        else:
+            dist.std_param.fill_(noise_std)
+    log.info(
+        "init: PPO's actor is the distilled student of %s (action std %g); the critic starts untrained",
+        Path(path).name,
+        noise_std,
+    )
+
+
+def install_critic_warmup(runner: OnPolicyRunner, iterations: int, learning_rate: float) -> None:
+    """For the run's iterations below ``iterations``, PPO's update trains the critic only, at the fixed
+    ``learning_rate`` (the adaptive schedule reads the actor's KL, which is ~0 while it is frozen, and would
+    raise the rate to its ceiling); from then on the actor learns too, from the configured rate and schedule."""
+    alg = runner.alg
+    start = runner.current_learning_iteration
+    if start >= iterations:
+        return
+    update = alg.update
+    schedule = alg.schedule
+    calls = 0
+
+    def set_rate(lr: float) -> None:
+        alg.learning_rate = lr
+        for group in alg.optimizer.param_groups:
+            group["lr"] = lr
+
+    def warm_update() -> dict[str, float]:
+        nonlocal calls
+        warm = start + calls < iterations
+        calls += 1
+        if not warm:
+            return update()
+        trainable = [p for p in alg.actor.parameters() if p.requires_grad]
+        for p in trainable:
+            p.requires_grad_(False)  # Adam skips parameters without gradients: the actor is untouched
+        alg.schedule = "fixed"
+        set_rate(learning_rate)
+        try:
+            return update()
+        finally:
+            for p in trainable:
+                p.requires_grad_(True)
+            alg.schedule = schedule
+            if start + calls == iterations:
+                set_rate(learning_rate)
+                log.info("critic warm-up done after %d iterations: the actor learns from now on", iterations)
+
+    alg.update = warm_update
+    log.info("critic warm-up: the actor is frozen for iterations %d-%d", start, iterations - 1)

@@ -55,7 +55,7 @@ def student(tmp_path_factory) -> Path:
     return path
 
 
-def _finetune_cfg(student: Path, run_dir: Path, **algo) -> TrainCfg:
+def _finetune_cfg(student: Path, run_dir: Path) -> TrainCfg:
     algo = AlgoCfg(
         actor_hidden_dims=[32, 32],
         critic_hidden_dims=[32],
@@ -65,7 +65,6 @@ def _finetune_cfg(student: Path, run_dir: Path, **algo) -> TrainCfg:
         num_steps_per_env=8,
         num_mini_batches=2,
         save_interval=1,
-        **algo,
     )
     return TrainCfg(task=_task(), algo=algo, init=str(student), max_iterations=4, run_dir=str(run_dir))
 

@@ -9,8 +9,9 @@ import torch
 
 from cat.envs.config import ACTOR_TERMS, EnvCfg, ObsGroupCfg
 from cat.learning.config import AlgoCfg, DistillCfg, TrainCfg, policy_model
+from cat.learning.finetune import install_critic_warmup
 from cat.learning.hydra_cfg import load_config
-from cat.learning.runs import make_env, save_config, train, validate_train_cfg
+from cat.learning.runs import make_env, make_runner, save_config, train, validate_train_cfg
 
 STUDENT_GROUPS = ["student_proprio", "student"]
 
@@ -89,6 +90,25 @@ def test_the_student_becomes_the_actor_and_only_the_critic_learns_during_warm_up
     assert any(not torch.equal(after[k], v) for k, v in _params(src, "mlp.").items())  # then the actor does too
 
 
+def test_the_warm_up_trains_the_critic_unclipped_at_its_own_rate_then_restores_ppo(tmp_path):
+    cfg = _finetune_cfg(Path("unused"), tmp_path)
+    cfg.init = None
+    env = make_env(cfg, num_envs=8)
+    runner = make_runner(cfg, env, None)
+    alg = runner.alg
+    seen: list[tuple[bool, float, str]] = []
+    update = alg.update
+
+    def spy() -> dict[str, float]:  # what rsl_rl's update runs with, read as it starts
+        seen.append((alg.use_clipped_value_loss, alg.optimizer.param_groups[0]["lr"], alg.schedule))
+        return update()
+
+    alg.update = spy
+    install_critic_warmup(runner, iterations=2, warmup_rate=2e-3, learning_rate=5e-5)
+    runner.learn(3)
+    assert seen == [(False, 2e-3, "fixed"), (False, 2e-3, "fixed"), (True, 5e-5, "adaptive")]
+
+
 def test_an_actor_unlike_the_student_is_refused_before_any_env_is_built(student, tmp_path):
     cfg = _finetune_cfg(student, tmp_path)
     cfg.algo.actor_hidden_dims = [64]
@@ -101,6 +121,10 @@ def test_an_actor_unlike_the_student_is_refused_before_any_env_is_built(student,
     cfg = _finetune_cfg(student, tmp_path)
     cfg.algo.critic_warmup_iterations = -1
     with pytest.raises(ValueError, match="algo.critic_warmup_iterations=-1"):
+        validate_train_cfg(cfg)
+    cfg = _finetune_cfg(student, tmp_path)
+    cfg.algo.critic_warmup_learning_rate = 0.0
+    with pytest.raises(ValueError, match="algo.critic_warmup_learning_rate=0.0"):
         validate_train_cfg(cfg)
 
 

@@ -73,6 +73,9 @@ class AlgoCfg:
     # iterations at the start of the run in which PPO trains the critic only (actor frozen, fixed rate): a new
     # critic under a trained actor (init= a distilled student, cat/learning/finetune.py) first learns its values
     critic_warmup_iterations: int = 0
+    # the warm-up's rate, with PPO's value clipping off: the clip keeps each value within clip_param of its
+    # rollout-time estimate per update, so a new critic at the fine-tuning rate crawls (docs/distillation.md)
+    critic_warmup_learning_rate: float = 1.0e-3
     save_interval: int = 50
     symmetry_augment: bool = False  # add left/right mirrored samples to every PPO mini-batch (cat.envs.symmetry)
     mirror_loss_coeff: float = 0.0  # > 0: also penalise disagreement between the policy and its mirror image

@@ -68,16 +68,20 @@ def load_student_as_actor(runner: OnPolicyRunner, ckpt: dict, path: str, noise_s
     )
 
 
-def install_critic_warmup(runner: OnPolicyRunner, iterations: int, learning_rate: float) -> None:
+def install_critic_warmup(runner: OnPolicyRunner, iterations: int, warmup_rate: float, learning_rate: float) -> None:
     """For the run's iterations below ``iterations``, PPO's update trains the critic only, at the fixed
-    ``learning_rate`` (the adaptive schedule reads the actor's KL, which is ~0 while it is frozen, and would
-    raise the rate to its ceiling); from then on the actor learns too, from the configured rate and schedule."""
+    ``warmup_rate`` and without value clipping; from then on the actor learns too, from ``learning_rate`` and the
+    configured schedule and clipping.
+
+    Why each: the adaptive schedule reads the actor's KL, ~0 while it is frozen, and would raise the rate to its
+    ceiling; PPO's clipped value loss keeps every value within ``clip_param`` of its rollout-time estimate per
+    update, a brake that suits a trained critic and leaves a new one hundreds of updates from its targets."""
     alg = runner.alg
     start = runner.current_learning_iteration
     if start >= iterations:
         return
     update = alg.update
-    schedule = alg.schedule
+    schedule, clipped = alg.schedule, alg.use_clipped_value_loss
     calls = 0
 
     def set_rate(lr: float) -> None:
@@ -94,17 +98,22 @@ def install_critic_warmup(runner: OnPolicyRunner, iterations: int, learning_rate
         trainable = [p for p in alg.actor.parameters() if p.requires_grad]
         for p in trainable:
             p.requires_grad_(False)  # Adam skips parameters without gradients: the actor is untouched
-        alg.schedule = "fixed"
-        set_rate(learning_rate)
+        alg.schedule, alg.use_clipped_value_loss = "fixed", False
+        set_rate(warmup_rate)
         try:
             return update()
         finally:
             for p in trainable:
                 p.requires_grad_(True)
-            alg.schedule = schedule
+            alg.schedule, alg.use_clipped_value_loss = schedule, clipped
             if start + calls == iterations:
                 set_rate(learning_rate)
                 log.info("critic warm-up done after %d iterations: the actor learns from now on", iterations)
 
     alg.update = warm_update
-    log.info("critic warm-up: the actor is frozen for iterations %d-%d", start, iterations - 1)
+    log.info(
+        "critic warm-up: the actor is frozen for iterations %d-%d (critic rate %g, no value clipping)",
+        start,
+        iterations - 1,
+        warmup_rate,
+    )

@@ -169,6 +169,8 @@ def validate_train_cfg(cfg: TrainCfg) -> None:
         raise ValueError("task.warmup_variants builds typical scenes: it cannot be used with task.scene_dir")
     if cfg.task.episode_length_s <= 0:
         raise ValueError(f"task.episode_length_s={cfg.task.episode_length_s}: must be > 0")
+    if cfg.algo.critic_warmup_iterations > 0 and cfg.algo.critic_warmup_learning_rate <= 0:
+        raise ValueError(f"algo.critic_warmup_learning_rate={cfg.algo.critic_warmup_learning_rate}: must be > 0")
     env_groups = resolve_groups(cfg.task.observations)
     check_obs_groups(cfg.algo.obs_groups, env_groups)  # names, before any env is built
     if cfg.algo.name not in ALGOS:
@@ -390,7 +392,9 @@ def _train_in(cfg: TrainCfg, env: TraversalEnv, run_dir: Path) -> Path:
         return run_dir
     _save_with_state(runner, env, cfg, runner.save)
     if cfg.algo.name == "ppo" and cfg.algo.critic_warmup_iterations > 0:
-        install_critic_warmup(runner, cfg.algo.critic_warmup_iterations, cfg.algo.learning_rate)
+        install_critic_warmup(
+            runner, cfg.algo.critic_warmup_iterations, cfg.algo.critic_warmup_learning_rate, cfg.algo.learning_rate
+        )
     install_iteration_hook(runner, cfg.max_iterations, cfg.max_minutes, cfg.verbose)
     try:
         with quiet_constructor(cfg.verbose):  # rsl_rl's "Storing git diff" lines

@@ -8,7 +8,8 @@ import pytest
 import torch
 
 from cat.cli import run
-from cat.learning.runs import CheckpointError
+from cat.learning.config import TrainCfg
+from cat.learning.runs import CheckpointError, validate_train_cfg
 from cat.learning.ship import SCRIPT, ShipCfg, ship
 
 
@@ -64,3 +65,16 @@ def test_ship_refusals_leave_out_unchanged(tmp_path, capsys):
     assert run(SCRIPT, [f"checkpoint={src.parent}", f"out={out}", "force=true"]) == 0  # the run folder's latest model
     assert sorted(p.name for p in out.iterdir()) == ["config.yaml", "env_40.pt", "metrics.csv", "model_40.pt"]
     assert "wrote" in capsys.readouterr().out
+
+
+def test_weights_only_ships_the_networks_and_refuses_a_resume(tmp_path):
+    src = _run(tmp_path)
+    out = tmp_path / "checkpoints" / "student"
+    written = ship(ShipCfg(checkpoint=str(src), out=str(out), weights_only=True))
+    assert sorted(p.name for p in written) == ["config.yaml", "metrics.csv", "model_40.pt"]  # no env snapshot
+    shipped = torch.load(out / "model_40.pt", weights_only=False)
+    assert "optimizer_state_dict" not in shipped and shipped["iter"] == 40
+    assert (out / "model_40.pt").stat().st_size < 0.4 * src.stat().st_size  # 1 of the 3 float32 copies
+    torch.testing.assert_close(shipped["student_state_dict"], torch.load(src, weights_only=False)["student_state_dict"])
+    with pytest.raises(CheckpointError, match="init= instead"):
+        validate_train_cfg(TrainCfg(resume=str(out / "model_40.pt")))

@@ -205,6 +205,11 @@ def validate_train_cfg(cfg: TrainCfg) -> None:
     path = cfg.resume or cfg.init
     if path:
         ckpt = read_checkpoint(path)
+        if cfg.resume and "optimizer_state_dict" not in ckpt:
+            raise CheckpointError(
+                f"resume={path}: it holds no optimiser state (shipped with weights_only=true), so the run cannot "
+                "continue exactly; start a new run from it with init= instead"
+            )
         if not cfg.resume and is_student_checkpoint(ckpt):
             check_actor_matches_student(cfg, load_run_config(path), str(path))
 

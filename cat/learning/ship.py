@@ -29,6 +29,9 @@ class ShipCfg:
     out: str = "???"  # folder to write, e.g. checkpoints/generalist
     max_mb: float = 5.0  # refuse a model file larger than this after compaction (MiB)
     force: bool = False  # replace the checkpoint files already in out
+    # the networks only (no optimiser state, no env snapshot), for a checkpoint too large to ship whole: it plays,
+    # exports and starts new runs (init=), but cannot be resumed
+    weights_only: bool = False
 
 
 def compact_optimizer_state(ckpt: dict) -> dict:
@@ -61,11 +64,16 @@ def ship(cfg: ShipCfg) -> list[Path]:
         raise FileExistsError(f"{out} already holds {others}: pass force=true to replace them")
     with tempfile.TemporaryDirectory(dir=out.parent if out.parent.is_dir() else None) as tmp:
         stage = Path(tmp)
+        if cfg.weights_only:
+            ckpt = {k: v for k, v in ckpt.items() if not k.startswith("optimizer")}
         torch.save(compact_optimizer_state(ckpt), stage / src.name)
         size_mb = (stage / src.name).stat().st_size / 2**20
         if size_mb > cfg.max_mb:
-            raise ValueError(f"{src.name} is {size_mb:.2f} MB after compaction, above max_mb={cfg.max_mb}")
-        companions = [config, run_dir / "metrics.csv", env_snapshot_path(src)]
+            raise ValueError(
+                f"{src.name} is {size_mb:.2f} MB after compaction, above max_mb={cfg.max_mb}"
+                + ("" if cfg.weights_only else " (weights_only=true drops the optimiser state)")
+            )
+        companions = [config, run_dir / "metrics.csv"] + ([] if cfg.weights_only else [env_snapshot_path(src)])
         for path in companions:
             if path.is_file():
                 shutil.copy2(path, stage / path.name)

@@ -4,8 +4,11 @@ from __future__ import annotations
 
 import math
 
+import mujoco
+import numpy as np
 import pytest
 import torch
+import torch.nn.functional as F
 
 from cat.envs.config import CommandCfg, EnvCfg, NoiseCfg
 from cat.envs.mdp import rewards as rew
@@ -113,3 +116,49 @@ def test_foot_clearance_min_only_lets_feet_clear_a_hurdle(flat_env):
         assert (rew.feet_clearance(env) > 0).any()
     finally:
         params.foot_clearance_min_only = False
+
+
+def test_foot_sole_barrier_sees_a_toe_the_sole_centre_does_not():
+    """Heel and toe points from MuJoCo's own kinematics, SDF of the bar computed analytically (a cylinder along
+    y): the term matches, and it is large where the sole-centre barrier is small (toe over the bar's edge)."""
+    scenes = SceneSet.typical("hurdle-pass", num_envs=1, variants=1)
+    cfg = EnvCfg(num_envs=1, scene_kind="hurdle-pass", noise=NoiseCfg(enabled=False))
+    cfg.rewards.foot_sole_barrier = -2.0
+    env = TraversalEnv(cfg, sim="mujoco", scenes=scenes, seed=1)
+    v = np.asarray(scenes.mesh_for_env(0).vertices)
+    bar = v[(v[:, 2] > 1e-3) & (v[:, 2] < 0.4)]  # the corridor's boxes have no vertex between floor and top
+    xc, r = 0.5 * (bar[:, 0].min() + bar[:, 0].max()), 0.5 * (bar[:, 0].max() - bar[:, 0].min())
+    zc = bar[:, 2].max() - r
+    # stand so that the toes (10 cm ahead of the sole centre) reach 3 cm into the bar's footprint
+    qpos, qvel = env.sim.qpos.clone(), env.sim.qvel.clone()
+    qpos[0, 3:7] = torch.tensor([1.0, 0.0, 0.0, 0.0], dtype=qpos.dtype)
+    env.sim.reset(torch.tensor([0]), qpos, qvel)
+    env._update_state()
+    shift = (xc - r + 0.03) - (float(env.state.foot_pos[0, 0, 0]) + env.robot.foot_sole[1])
+    qpos[0, 0] += shift
+    env.sim.reset(torch.tensor([0]), qpos, qvel)
+    env._update_state()
+    env._update_field()
+
+    m = env.sim.model
+    d = mujoco.MjData(m)
+    d.qpos[:] = qpos[0].numpy()
+    mujoco.mj_forward(m, d)
+    expect = 0.0
+    p = cfg.rewards.params
+    for k, foot in enumerate(env.robot.feet):
+        axis = d.xmat[m.body(foot).id].reshape(3, 3)[:, 0]
+        torch.testing.assert_close(
+            env.state.foot_axis[0, k], torch.tensor(axis, dtype=torch.float32), atol=1e-5, rtol=0
+        )
+        centre = d.site_xpos[m.site(env.robot.query_site_names[env._foot_link[k]]).id]
+        for end in env.robot.foot_sole:
+            x, _, z = centre + end * axis
+            dist = math.hypot(x - xc, z - zc) - r
+            expect += math.log1p(math.exp((p.sole_margin - dist) / p.barrier_width))
+    got = float(rew.foot_sole_barrier(env)[0])
+    assert got == pytest.approx(expect, rel=0.15), (got, expect)
+    centre_only = F.softplus((p.barrier_margin - env.field.sdf[0, env._foot_link]) / p.barrier_width).sum()
+    assert got > 2.0 and got > 3 * float(centre_only)
+    env.step(torch.zeros(1, env.num_actions))
+    assert env.episode_sums["foot_sole_barrier"][0] < 0

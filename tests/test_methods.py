@@ -39,7 +39,7 @@ def test_methods_compose_and_are_recorded():
     for m in FIELD_FREE_REWARD:
         t = got[m].task
         assert t.command.source == "straight" and t.rewards.params.heading_gate == "none"
-        assert t.rewards.field_vmf == 0 and t.rewards.sdf_barrier == 0
+        assert t.rewards.field_vmf == 0 and t.rewards.sdf_barrier == 0 == t.rewards.foot_sole_barrier
     assert got["wo_r_field"].task.rewards.collision == got["humanoid_parkour"].task.rewards.collision == -20.0
     assert got["astraversal"].task.rewards.map_clearance < 0 and got["astraversal"].task.rewards.collision == -5.0
     assert got["ours"].task == load_config([]).task  # ours is the task as configured

@@ -59,6 +59,7 @@ class RobotCfg:
     feet: list[str]
     collision_geoms: list[str]
     floor_geoms_exclude: list[str] = field(default_factory=list)
+    foot_sole: tuple[float, float] | None = None  # heel and toe along the foot's x axis from its query point [m]
 
     @property
     def num_joints(self) -> int:
@@ -110,7 +111,16 @@ def load_robot_cfg(path: str | os.PathLike | None = None) -> RobotCfg:
         feet=list(raw["feet"]),
         collision_geoms=list(raw["collision_geoms"]),
         floor_geoms_exclude=list(raw.get("floor_geoms_exclude", [])),
+        foot_sole=_foot_sole(raw.get("foot_sole"), path),
     )
+
+
+def _foot_sole(raw, path: Path) -> tuple[float, float] | None:
+    if raw is None:
+        return None
+    if len(raw) != 2 or not float(raw[0]) < float(raw[1]):
+        raise ValueError(f"{path}: foot_sole must be [heel, toe] offsets with heel < toe, got {raw}")
+    return float(raw[0]), float(raw[1])
 
 
 def menagerie_model_path(cfg: RobotCfg) -> Path:

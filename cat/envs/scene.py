@@ -29,6 +29,11 @@ def foot_contact_sensor(foot_body: str) -> str:
     return f"floor_contact_{foot_body}"
 
 
+def foot_axis_sensor(foot_body: str) -> str:
+    """The foot body's x axis in the world frame (heel-to-toe direction)."""
+    return f"xaxis_{foot_body}"
+
+
 PART_SENSOR_PREFIX = "obstacle_contact_"
 
 
@@ -119,8 +124,8 @@ def build_env_model(
     The robot's visual meshes (200k vertices, no collision role, inertias are explicit) are dropped unless
     ``visual_meshes``: they make per-world model copies (domain randomisation) 500x slower.
 
-    Sensors added (world frame): position and linear velocity of each query site, floor contact count per
-    foot, and (when the spec has an ``obstacles`` body) the number of robot-obstacle contacts, in all and per
+    Sensors added (world frame): position and linear velocity of each query site, floor contact count and x
+    axis per foot, and (when the spec has an ``obstacles`` body) the number of robot-obstacle contacts, in all and per
     robot body with a collision geom.
     """
     return compile_model(env_spec(robot, add_obstacles, visual_meshes))
@@ -159,6 +164,9 @@ def env_spec(
     body, xbody, geom = mujoco.mjtObj.mjOBJ_BODY, mujoco.mjtObj.mjOBJ_XBODY, mujoco.mjtObj.mjOBJ_GEOM
     for foot in robot.feet:
         _contact_count_sensor(spec, foot_contact_sensor(foot), (body, foot), (geom, "floor"))
+        spec.add_sensor(
+            name=foot_axis_sensor(foot), type=mujoco.mjtSensor.mjSENS_FRAMEXAXIS, objtype=xbody, objname=foot
+        )
     if spec.body(OBSTACLE_BODY) is not None:
         _contact_count_sensor(spec, COLLISION_SENSOR, (xbody, robot.root_body), (xbody, OBSTACLE_BODY))
         wanted = set(robot.collision_geoms)

@@ -35,6 +35,7 @@ from cat.envs.scene import (
     COLLISION_SENSOR,
     PART_SENSOR_PREFIX,
     build_env_model,
+    foot_axis_sensor,
     foot_contact_sensor,
     make_training_ghosts,
     part_obstacle_sensor,
@@ -62,6 +63,7 @@ class SimState:
     link_vel: torch.Tensor
     foot_pos: torch.Tensor  # (N, 2, 3)
     foot_vel: torch.Tensor
+    foot_axis: torch.Tensor  # (N, 2, 3) each foot's heel-to-toe (x) axis
     foot_contact: torch.Tensor  # (N, 2) bool
     collision: torch.Tensor  # (N,) bool: any robot-obstacle contact (success rule, metrics, penalty)
     hard_collision: torch.Tensor  # (N,) bool: a contact that exerts force (ends the episode under on_collision)
@@ -188,6 +190,7 @@ class TraversalEnv(VecEnv):
         self._i_link_vel = torch.tensor([cols(query_vel_sensor(nm)) for nm in names], device=self.device)
         self._i_gyro = torch.tensor(cols("gyro_pelvis"), device=self.device)
         self._i_feet = torch.tensor([cols(foot_contact_sensor(f))[0] for f in r.feet], device=self.device)
+        self._i_foot_axis = torch.tensor([cols(foot_axis_sensor(f)) for f in r.feet], device=self.device)
         self._i_collision = cols(COLLISION_SENSOR)[0] if COLLISION_SENSOR in s.sensors else None
         self._i_hard_collision = None  # with ghost parts: the other bodies' contacts (max over the substeps)
         if self._i_collision is not None and self.cfg.ghost_parts:
@@ -233,6 +236,7 @@ class TraversalEnv(VecEnv):
             link_vel=link_vel,
             foot_pos=link_pos[:, self._foot_link],
             foot_vel=link_vel[:, self._foot_link],
+            foot_axis=sens[:, self._i_foot_axis],
             foot_contact=sens[:, self._i_feet] > 0,
             collision=collision,
             hard_collision=hard,

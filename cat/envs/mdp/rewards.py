@@ -168,6 +168,21 @@ def sdf_barrier(env: TraversalEnv) -> torch.Tensor:
     return F.softplus((p.barrier_margin - env.field.sdf) / p.barrier_width).sum(dim=-1)
 
 
+def foot_sole_barrier(env: TraversalEnv) -> torch.Tensor:
+    """``sdf_barrier`` at each foot's heel and toe (``RobotCfg.foot_sole`` along the foot's x axis), with margin
+    ``params.sole_margin``: the sole is ~20 cm long, so a foot landing on a bar or tripping on it touches with a
+    heel or toe whose SDF the query point at the sole's centre does not see (hurdles; docs/training.md)."""
+    sole = env.robot.foot_sole
+    if sole is None:
+        raise ValueError("the foot_sole_barrier reward needs foot_sole: [heel, toe] in the robot description")
+    p = env.cfg.rewards.params
+    st = env.state
+    ends = torch.tensor(sole, device=env.device, dtype=st.foot_pos.dtype)
+    points = st.foot_pos[:, :, None] + st.foot_axis[:, :, None] * ends[:, None]  # (N, feet, 2, 3)
+    sdf = env.field_source.sample(points.flatten(1, 2), env.goals).sdf
+    return F.softplus((p.sole_margin - sdf) / p.barrier_width).sum(dim=-1)
+
+
 def map_clearance(env: TraversalEnv) -> torch.Tensor:
     """ASTraversal-style obstacle avoidance on the elevation map (no HumanoidPF), summed over the 13 links:
 

@@ -19,6 +19,7 @@ from cat.envs import field_source as fsrc
 from cat.envs import snapshot
 from cat.envs.config import EnvCfg
 from cat.envs.curriculum import DifficultyCurriculum
+from cat.envs.episode_log import episode_log
 from cat.envs.field_source import FieldSample
 from cat.envs.math_utils import quat_rotate_inverse, yaw_from_quat, yaw_quat
 from cat.envs.mdp import events
@@ -339,7 +340,7 @@ class TraversalEnv(VecEnv):
         extras = {"time_outs": time_outs, "log": {}}
         done_ids = dones.nonzero(as_tuple=False).flatten()
         if len(done_ids) > 0 and self.auto_reset:
-            extras["log"] = self._episode_log(done_ids)
+            extras["log"] = episode_log(self, done_ids)
             if self.curriculum is not None:
                 self.curriculum.update(done_ids, self.episode_success(done_ids))
                 extras["log"].update(self.curriculum.log())
@@ -372,20 +373,6 @@ class TraversalEnv(VecEnv):
     def reached_time(self) -> torch.Tensor:
         """(N,) time of the first arrival within the success radius since reset (inf: not yet)."""
         return self.trial.reach_time
-
-    def _episode_log(self, ids: torch.Tensor) -> dict:
-        length_s = (self.step_count[ids].to(torch.float32) * self.dt).clamp_min(self.dt)
-        out = {f"Episode_Reward/{k}": (v[ids] / length_s).mean() for k, v in self.episode_sums.items()}
-        tr = self.trial
-        out["Metrics/success_rate"] = tr.success(ids).float().mean()
-        out["Metrics/reached_rate"] = torch.isfinite(tr.reach_time[ids]).float().mean()
-        out["Metrics/distance_error"] = tr.distance_error(ids).mean()
-        out["Metrics/collision_rate"] = tr.collided[ids].float().mean()
-        out["Metrics/fall_rate"] = tr.fell[ids].float().mean()
-        for name, flags in self.termination_flags.items():  # the causes, as fractions of the ended episodes
-            out[f"Episode_Termination/{name}"] = flags[ids].float().mean()
-        out["Episode_Termination/time_out"] = (self.episode_length_buf[ids] >= self.max_episode_length).float().mean()
-        return out
 
     @property
     def scene_group_names(self) -> list[str]:

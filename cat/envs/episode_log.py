@@ -1,0 +1,27 @@
+"""What an env logs about the episodes that just ended (rsl_rl's ``extras["log"]``, written to metrics.csv)."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import torch
+
+if TYPE_CHECKING:
+    from cat.envs.traversal_env import TraversalEnv
+
+
+def episode_log(env: TraversalEnv, ids: torch.Tensor) -> dict[str, torch.Tensor]:
+    """Means over the ended episodes ``ids``: each reward term per second of episode, the trial metrics
+    (``cat.eval.metrics``: success, reached, distance error, collision, fall) and the termination causes."""
+    length_s = (env.step_count[ids].to(torch.float32) * env.dt).clamp_min(env.dt)
+    out = {f"Episode_Reward/{k}": (v[ids] / length_s).mean() for k, v in env.episode_sums.items()}
+    tr = env.trial
+    out["Metrics/success_rate"] = tr.success(ids).float().mean()
+    out["Metrics/reached_rate"] = torch.isfinite(tr.reach_time[ids]).float().mean()
+    out["Metrics/distance_error"] = tr.distance_error(ids).mean()
+    out["Metrics/collision_rate"] = tr.collided[ids].float().mean()
+    out["Metrics/fall_rate"] = tr.fell[ids].float().mean()
+    for name, flags in env.termination_flags.items():  # the causes, as fractions of the ended episodes
+        out[f"Episode_Termination/{name}"] = flags[ids].float().mean()
+    out["Episode_Termination/time_out"] = (env.episode_length_buf[ids] >= env.max_episode_length).float().mean()
+    return out

@@ -2,7 +2,8 @@
 
 Optional: ``record=rollout.rrd`` (rerun replay of world 0), ``seed=`` (start poses), ``scene_seed=`` /
 ``scene_dir=`` (other scenes than the run's), ``mirror=true`` (their left/right mirror images), ``sim=``,
-``num_envs=``, ``by_scene=true`` (first one line per scene: ``scene=<i> kind=<k> difficulty=<d> episodes=...``).
+``num_envs=``, ``by_scene=true`` (first one line per scene: ``scene=<i> kind=<k> difficulty=<d> episodes=...``),
+``contacts=true`` (then a line naming the body that touched first: ``first_contact=<body>:<trials>,...``).
 Prints one line: ``episodes=<n> success_rate=<x> distance_error=<m> collision_rate=<x> fall_rate=<x>``.
 """
 
@@ -12,15 +13,18 @@ import sys
 
 from cat.cli import Script, dataclass_loader, run
 from cat.envs.scene_set import SceneSetError
+from cat.eval.contacts import contact_line
 from cat.eval.metrics import summarize
 from cat.learning.play import PlayCfg, play_trials, scene_lines
 from cat.learning.runs import CheckpointError
 
 
 def _job(cfg: PlayCfg) -> int:
-    trials, results, scenes = play_trials(cfg)
+    trials, results, scenes, first = play_trials(cfg)
     if cfg.by_scene:
         print("\n".join(scene_lines(trials, results, scenes)))
+    if first is not None:
+        print(contact_line(first))
     print(summarize(results).line())
     return 0
 

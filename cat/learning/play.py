@@ -14,6 +14,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from cat.eval.contacts import FirstContacts
 from cat.eval.metrics import Summary, TrialResult, summarize
 from cat.eval.runner import EvalCfg, make_eval_env, run_scene_group, run_trials
 from cat.eval.trials import Trial, first_trials, flat_trials, scene_trials
@@ -37,6 +38,7 @@ class PlayCfg:
     time_s: float = 5.0  # trial length (paper: 5 s); e.g. 20 to measure falls over a whole flat episode
     record: str = ""  # .rrd path: record world 0 of the rollout for rerun replay (`rerun <file>`)
     by_scene: bool = False  # scripts/play.py also prints one line per evaluated scene (where a policy fails)
+    contacts: bool = False  # scripts/play.py also prints which body touched first (cat.eval.contacts)
 
 
 def play(cfg: PlayCfg) -> Summary:
@@ -54,8 +56,11 @@ def scene_lines(trials: list[Trial], results: list[TrialResult], scenes: list[Sc
     return lines
 
 
-def play_trials(cfg: PlayCfg) -> tuple[list[Trial], list[TrialResult], list[Scene] | None]:
-    """The trials of ``play``, their results in order, and the evaluated scenes (``None`` on flat ground)."""
+def play_trials(
+    cfg: PlayCfg,
+) -> tuple[list[Trial], list[TrialResult], list[Scene] | None, list[str | None] | None]:
+    """The trials of ``play``, their results in order, the evaluated scenes (``None`` on flat ground) and, with
+    ``cfg.contacts``, each trial's first-contact bodies (``cat.eval.contacts``; else ``None``)."""
     cfg = replace(cfg, checkpoint=str(resolve_checkpoint(cfg.checkpoint)))
     run_cfg = load_run_config(cfg.checkpoint)
     task = run_cfg.task
@@ -82,19 +87,31 @@ def play_trials(cfg: PlayCfg) -> tuple[list[Trial], list[TrialResult], list[Scen
     n = cfg.num_envs if cfg.num_envs is not None else min(cfg.episodes, 64)
     env = make_eval_env(task, group, n, opts, sim=cfg.sim or run_cfg.sim.backend, device=run_cfg.sim.device)
     policy = load_policy(cfg.checkpoint, env, run_cfg)
-    on_step = None
+    hooks = []
+    if cfg.contacts:
+        if group is None:
+            raise ValueError("contacts=true needs obstacle scenes; this run trained on flat ground")
+        contacts = FirstContacts(env)
+        hooks.append(contacts.on_step)
     if cfg.record:
         from cat.viz.record import RolloutRecorder
 
         recorder = RolloutRecorder(cfg.record, env)
 
-        def on_step(e):  # re-log the obstacles when world 0 starts a trial in another scene
+        def record(e):  # re-log the obstacles when world 0 starts a trial in another scene
             if e.step_count[0] == 0:
                 recorder.log_obstacles()
             recorder.log_step(e)
 
+        hooks.append(record)
+
+    def on_step(e):
+        for hook in hooks:
+            hook(e)
+
     with tqdm(total=len(trials), desc="trials", unit="trial") as bar:
-        results = run_trials(env, policy, trials, seed=cfg.seed, progress=bar, on_step=on_step)
+        results = run_trials(env, policy, trials, seed=cfg.seed, progress=bar, on_step=on_step if hooks else None)
     if cfg.record:
         recorder.close()
-    return trials, results, (list(group.scenes) if group is not None else None)
+    first = contacts.first_bodies(len(trials)) if cfg.contacts else None
+    return trials, results, (list(group.scenes) if group is not None else None), first

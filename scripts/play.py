@@ -3,7 +3,8 @@
 Optional: ``record=rollout.rrd`` (rerun replay of world 0), ``seed=`` (start poses), ``scene_seed=`` /
 ``scene_dir=`` (other scenes than the run's), ``mirror=true`` (their left/right mirror images), ``sim=``,
 ``num_envs=``, ``by_scene=true`` (first one line per scene: ``scene=<i> kind=<k> difficulty=<d> episodes=...``),
-``contacts=true`` (then a line naming the body that touched first: ``first_contact=<body>:<trials>,...``).
+``contacts=true`` (then a line naming the body that touched first: ``first_contact=<body>:<trials>,...``),
+``warmup=true`` (the run's training-only warm-up scenes instead of the paper's: where its curriculum stands).
 Prints one line: ``episodes=<n> success_rate=<x> distance_error=<m> collision_rate=<x> fall_rate=<x>``.
 """
 

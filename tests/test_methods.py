@@ -13,14 +13,16 @@ import pytest
 import torch
 import yaml
 
+from cat.envs.config import EnvCfg
 from cat.envs.field_source import FieldSample
 from cat.envs.mdp import rewards as rew
 from cat.eval.manifest import ManifestError, load_manifest
 from cat.eval.metrics import TrialResult, summarize
+from cat.eval.runner import run_scene_group
 from cat.learning.hydra_cfg import ConfigError, load_config
 from cat.learning.play import PlayCfg, play, play_trials, scene_lines
 from cat.learning.runs import load_run_config, make_env, resume_config, train
-from cat.terrain.typical import make_typical
+from cat.terrain.typical import make_typical, warmup_variants
 
 METHODS = ("ours", "wo_obs_field", "wo_r_field", "astraversal", "humanoid_parkour")
 FIELD_FREE_REWARD = ("wo_r_field", "astraversal", "humanoid_parkour")
@@ -174,3 +176,18 @@ def test_play_by_scene_lines_add_up_to_the_summary(method_runs):
     )
     assert lines[1] == f"scene=1 kind=crouch-pass difficulty=0.75 {summarize(results[3:]).line()}"
     assert len(lines) == 2
+
+
+def test_play_on_the_warmup_scenes(method_runs):
+    """play.py warmup=true: the run's training-only warm-up scenes, as training builds them (d < 0)."""
+    task = EnvCfg(scene_kind="hurdle-pass", warmup_variants=3, scene_seed=2)
+    group = run_scene_group(task, warmup=True)
+    expect = warmup_variants("hurdle-pass", 3, 2)
+    assert [s.difficulty for s in group.scenes] == [s.difficulty for s in expect]
+    assert np.allclose([s.difficulty for s in expect], [-1.0, -2 / 3, -1 / 3])
+    assert all(np.allclose(a.mesh.vertices, b.mesh.vertices) for a, b in zip(group.scenes, expect, strict=True))
+    with pytest.raises(ValueError, match="warmup=true evaluates a typical kind's warm-up scenes"):
+        run_scene_group(task, scene_dir="somewhere", warmup=True)
+    ckpt = str(method_runs["ours"])  # trained with task.warmup_variants=0
+    with pytest.raises(ValueError, match="warmup=true: the run's task 'hurdle-crouch' has no warm-up scenes"):
+        play_trials(PlayCfg(checkpoint=ckpt, episodes=2, warmup=True))

@@ -29,7 +29,7 @@ from cat.envs.traversal_env import TraversalEnv
 from cat.eval.metrics import TrialResult
 from cat.eval.trials import Trial
 from cat.fields import Field
-from cat.terrain import TYPICAL_KINDS, Scene, kind_name, typical_variants
+from cat.terrain import TYPICAL_KINDS, Scene, kind_name, typical_variants, warmup_variants
 
 log = logging.getLogger(__name__)
 
@@ -69,6 +69,14 @@ class SceneGroup:
         return cls(kind, scenes, names, [scene_fields(s, None, None) for s in scenes])
 
     @classmethod
+    def warmup(cls, kind: str, variants: int, scene_seed: int) -> SceneGroup:
+        """The training-only warm-up scenes of ``kind`` (difficulties in [-1, 0)), exactly as training builds them:
+        a diagnostic of where a curriculum stands, never a headline figure."""
+        scenes = warmup_variants(kind, variants, scene_seed)
+        names = [f"{kind}_warmup_{i:02d}" for i in range(variants)]
+        return cls(f"{kind}_warmup", scenes, names, [scene_fields(s, None, None) for s in scenes])
+
+    @classmethod
     def from_dir(cls, name: str, path: str | Path) -> SceneGroup:
         """Every scene folder under ``path`` (precomputed fields used when present)."""
         root = Path(path)
@@ -92,15 +100,18 @@ class SceneGroup:
 
 
 def run_scene_group(
-    task: EnvCfg, scene_seed: int | None = None, scene_dir: str = "", scene_kind: str = ""
+    task: EnvCfg, scene_seed: int | None = None, scene_dir: str = "", scene_kind: str = "", warmup: bool = False
 ) -> SceneGroup | None:
     """The scenes a run trained on (``None``: flat ground), unless ``scene_seed`` / ``scene_dir`` /
     ``scene_kind`` override them.
 
     Typical tasks rebuild their variants from ``task.scene_seed`` (not the RL seed); dataset tasks read
     ``task.scene_dir`` filtered to ``task.scene_kind``. A run over several typical groups (a generalist's
-    ``task.scene_groups``) is evaluated one group at a time: ``scene_kind`` names it.
+    ``task.scene_groups``) is evaluated one group at a time: ``scene_kind`` names it. ``warmup``: the kind's
+    ``task.warmup_variants`` training-only warm-up scenes instead of the paper's variants (typical kinds only).
     """
+    if warmup and (scene_dir or task.scene_dir):
+        raise ValueError("warmup=true evaluates a typical kind's warm-up scenes; it cannot read scene_dir scenes")
     if scene_kind:
         kind = kind_name(scene_kind)
         if kind not in TYPICAL_KINDS:
@@ -127,7 +138,13 @@ def run_scene_group(
         return group
     if task.scene_kind:
         seed = task.scene_seed if scene_seed is None else scene_seed
+        if warmup:
+            if task.warmup_variants < 1:
+                raise ValueError(f"warmup=true: the run's task {task.scene_kind!r} has no warm-up scenes")
+            return SceneGroup.warmup(task.scene_kind, task.warmup_variants, seed)
         return SceneGroup.typical(task.scene_kind, task.scene_variants, seed)
+    if warmup:
+        raise ValueError("warmup=true needs a typical scene kind; this run trained on flat ground")
     return None
 
 

@@ -38,6 +38,7 @@ class PlayCfg:
     time_s: float = 5.0  # trial length (paper: 5 s); e.g. 20 to measure falls over a whole flat episode
     record: str = ""  # .rrd path: record world 0 of the rollout for rerun replay (`rerun <file>`)
     by_scene: bool = False  # scripts/play.py also prints one line per evaluated scene (where a policy fails)
+    warmup: bool = False  # the run's training-only warm-up scenes (d < 0) instead: curriculum progress, diagnostic
     contacts: bool = False  # scripts/play.py also prints which body touched first (cat.eval.contacts)
 
 
@@ -66,7 +67,7 @@ def play_trials(
     task = run_cfg.task
     if cfg.episodes < 1:
         raise ValueError(f"episodes must be >= 1, got {cfg.episodes}")
-    group = run_scene_group(task, cfg.scene_seed, cfg.scene_dir, cfg.scene_kind)
+    group = run_scene_group(task, cfg.scene_seed, cfg.scene_dir, cfg.scene_kind, cfg.warmup)
     if cfg.mirror:
         if group is None:
             raise ValueError("mirror=true needs obstacle scenes; this run trained on flat ground")

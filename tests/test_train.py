@@ -141,3 +141,32 @@ def test_torchrun_maps_each_rank_to_its_gpu_and_seed():
     assert ranked.sim.device == "cuda:1" and ranked.seed == 4
     with pytest.raises(ValueError, match="needs sim.device=cuda"):
         for_this_rank(TrainCfg(seed=0), {"WORLD_SIZE": "2", "RANK": "0", "LOCAL_RANK": "0"})
+
+
+def test_mixed_precision_runs_the_ppo_update_in_bf16_and_the_rollout_in_fp32(tmp_path):
+    """algo.mixed_precision=true reaches rsl_rl's use_mixed_precision: the update's critic forward computes in
+    bf16 (autocast), the rollout's in fp32; the update's losses stay finite."""
+    import torch
+
+    from cat.learning.runs import make_env, make_runner
+
+    cfg = _small(tmp_path, "algo.mixed_precision=true")
+    env = make_env(cfg, num_envs=8)
+    runner = make_runner(cfg, env, None)
+    first = next(m for m in runner.alg.critic.modules() if isinstance(m, torch.nn.Linear))
+    dtypes: list[torch.dtype] = []
+    first.register_forward_hook(lambda mod, inp, out: dtypes.append(out.dtype))
+    losses: list[dict] = []
+    update = runner.alg.update
+
+    def spy():
+        dtypes.append("update")
+        losses.append(update())
+        return losses[-1]
+
+    runner.alg.update = spy
+    runner.learn(1)
+    split = dtypes.index("update")
+    assert set(dtypes[:split]) == {torch.float32}  # rollout: values in fp32
+    assert set(dtypes[split + 1 :]) == {torch.bfloat16}  # update: bf16 autocast
+    assert all(torch.isfinite(torch.tensor(v)) for v in losses[0].values())

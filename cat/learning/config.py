@@ -77,6 +77,9 @@ class AlgoCfg:
     # rollout-time estimate per update, so a new critic at the fine-tuning rate crawls (docs/distillation.md)
     critic_warmup_learning_rate: float = 1.0e-3
     save_interval: int = 50
+    # rsl_rl's use_mixed_precision: the PPO update's forward passes under bf16 autocast (the rollout stays fp32).
+    # About halves the update's matmul time on CPUs with AVX512-BF16 (docs/benchmarks.md); off by default
+    mixed_precision: bool = False
     symmetry_augment: bool = False  # add left/right mirrored samples to every PPO mini-batch (cat.envs.symmetry)
     mirror_loss_coeff: float = 0.0  # > 0: also penalise disagreement between the policy and its mirror image
     # rsl_rl observation sets -> the env's observation groups (task.observations) each network reads, concatenated
@@ -159,6 +162,7 @@ def runner_cfg(algo: AlgoCfg, env_groups: Iterable[str] | None = None) -> dict[s
             "desired_kl": algo.desired_kl,
             "schedule": algo.schedule,
             "symmetry_cfg": _symmetry_cfg(algo),
+            "use_mixed_precision": algo.mixed_precision,
         },
         "actor": {
             "class_name": "MLPModel",

@@ -259,6 +259,7 @@ class Runtime:
             link_vel=link_vel,
             foot_pos=link_pos[:, feet],
             foot_vel=link_vel[:, feet],
+            foot_axis=torch.full((1, 2, 3), float("nan")),  # read by a reward term only
             foot_contact=torch.zeros(1, 2, dtype=torch.bool),
             collision=torch.zeros(1, dtype=torch.bool),
             hard_collision=torch.zeros(1, dtype=torch.bool),

@@ -33,3 +33,15 @@ def test_first_contact_names_the_feet_standing_on_a_bar_and_none_in_free_space()
     assert contact_line(first) == f"first_contact={first[1]}:1 trials_with_contact=1/3"
     with pytest.raises(ValueError, match="fewer than the 5 trials"):
         rec.first_bodies(5)
+
+
+@pytest.mark.parametrize("option", ["contacts", "mirror"])
+def test_scene_options_on_a_flat_run_fail_before_anything_is_built(option):
+    """A flat-ground run has no obstacles to touch or mirror: one clear error, raised before the env is built."""
+    from pathlib import Path
+
+    from cat.learning.play import PlayCfg, play_trials
+
+    flat = Path(__file__).resolve().parents[1] / "checkpoints" / "flat" / "model_770.pt"
+    with pytest.raises(ValueError, match=f"{option}=true needs obstacle scenes; this run trained on flat ground"):
+        play_trials(PlayCfg(checkpoint=str(flat), episodes=2, **{option: True}))

@@ -68,9 +68,10 @@ def play_trials(
     if cfg.episodes < 1:
         raise ValueError(f"episodes must be >= 1, got {cfg.episodes}")
     group = run_scene_group(task, cfg.scene_seed, cfg.scene_dir, cfg.scene_kind, cfg.warmup)
+    for option in ("mirror", "contacts"):
+        if getattr(cfg, option) and group is None:
+            raise ValueError(f"{option}=true needs obstacle scenes; this run trained on flat ground")
     if cfg.mirror:
-        if group is None:
-            raise ValueError("mirror=true needs obstacle scenes; this run trained on flat ground")
         group = group.mirrored()
     if cfg.time_s <= 0:
         raise ValueError(f"time_s must be > 0, got {cfg.time_s}")
@@ -90,8 +91,6 @@ def play_trials(
     policy = load_policy(cfg.checkpoint, env, run_cfg)
     hooks = []
     if cfg.contacts:
-        if group is None:
-            raise ValueError("contacts=true needs obstacle scenes; this run trained on flat ground")
         contacts = FirstContacts(env)
         hooks.append(contacts.on_step)
     if cfg.record:

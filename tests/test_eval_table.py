@@ -19,7 +19,7 @@ import yaml
 
 from cat.eval import evaluate as evaluate_mod
 from cat.eval.evaluate import EvalTableCfg, evaluate
-from cat.eval.manifest import ManifestError
+from cat.eval.manifest import ManifestError, load_manifest
 from cat.eval.runner import run_scene_group
 from cat.learning.hydra_cfg import load_config
 from cat.learning.runs import load_run_config, make_env, train
@@ -192,6 +192,46 @@ def _broken_layout(checkpoint: Path, tmp_path: Path) -> Path:
     return run / checkpoint.name
 
 
+def test_per_type_row_plays_each_column_with_its_own_checkpoint(tmp_path, checkpoints, scene_dirs):
+    """A row of specialists: each listed Table I column is played by that type's checkpoint on the same trials
+    as the other rows; unlisted columns and Table II stay empty."""
+    a, b = (str(c) for c in checkpoints)
+    man = _manifest(
+        tmp_path / "m.yaml",
+        methods={"Spec": {"side-pass": [a], "hurdle-crouch": [b]}, "Ours": [a]},
+        table1={"scene_seed": 0, "variants": 1},
+        table2={"easy": str(scene_dirs["easy"])},
+    )
+    rows, files = evaluate(
+        EvalTableCfg(manifest=str(man), out=str(tmp_path / "o"), trials_per_scene=2, time_s=0.5, max_envs=4)
+    )
+    spec = [r for r in rows if r["method"] == "Spec"]
+    assert sorted((r["group"], r["checkpoint"]) for r in spec) == sorted(
+        [("hurdle-crouch", b)] * 2 + [("side-pass", a)] * 2
+    )
+    assert all(r["table"] == "table1" for r in spec)
+    start = ("scene", "goal", "start", "start_x", "start_y", "start_yaw")
+    ours = {(r["group"], *(r[k] for k in start)): r for r in rows if r["method"] == "Ours"}
+    for r in spec:  # same trials as the full row; side-pass is the very same checkpoint, so the same outcome
+        twin = ours[(r["group"], *(r[k] for k in start))]
+        if r["group"] == "side-pass":
+            assert (r["success"], r["de"], r["fell"]) == (twin["success"], twin["de"], twin["fell"])
+    t1 = files["table1.md"]
+    spec_lines = [line for line in t1.splitlines() if line.startswith("| Spec |")]
+    assert len(spec_lines) == 2 and all(line.count("–") == 6 for line in spec_lines)  # 3 of 4 columns per block
+    assert "Spec: each column played by that type's own checkpoint(s)" in t1
+    assert "| Spec |" not in files["table2.md"] and "| Ours |" in files["table2.md"]
+
+
+def test_shipped_table1_manifest_names_shipped_checkpoints(monkeypatch):
+    """configs/eval/table1.yaml stays in step with checkpoints/ (a re-shipped specialist renames its file)."""
+    monkeypatch.chdir(REPO)  # the manifest's paths are relative to the repository root
+    man = load_manifest(REPO / "configs" / "eval" / "table1.yaml")
+    assert man.table1 is not None and all(Path(r.checkpoint).is_file() for rs in man.methods.values() for r in rs)
+    kinds = {r.kind for r in man.methods["Ours (specialists)"]}
+    assert kinds <= set(TYPICAL_KINDS) and len(kinds) >= 4
+
+
 def test_bad_input_names_the_problem_and_writes_nothing(tmp_path, checkpoints, scene_dirs, caplog):
     ok = str(checkpoints[0])
     empty = tmp_path / "empty"
@@ -208,6 +248,15 @@ def test_bad_input_names_the_problem_and_writes_nothing(tmp_path, checkpoints, s
         ),
         "row_layouts": ({"methods": {"A": [ok, edited]}, "table1": {}}, f"checkpoint {edited} observation layout"),
         "ckpt_layout": ({"methods": {"A": [edited]}, "table1": {}}, f"checkpoint {edited} does not fit"),
+        "unknown_type": ({"methods": {"A": {"hurdle": [ok]}}, "table1": {}}, "method 'A': unknown scene type 'hurdle'"),
+        "per_type_t2": (
+            {"methods": {"A": {"side-pass": [ok]}}, "table2": {"easy": str(scene_dirs["easy"])}},
+            "method 'A' gives a checkpoint per scene type, which only table1 has",
+        ),
+        "type_layouts": (
+            {"methods": {"A": {"side-pass": [ok, edited]}}, "table1": {}},
+            f"method 'A' type 'side-pass': checkpoint {edited} observation layout",
+        ),
     }
     for name, (content, message) in cases.items():
         man = _manifest(tmp_path / f"{name}.yaml", **content)

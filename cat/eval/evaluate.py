@@ -119,12 +119,14 @@ def evaluate(cfg: EvalTableCfg) -> tuple[list[dict[str, str]], dict[str, str]]:
         for g in gl
     }
     runs = [run for rs in manifest.methods.values() for run in rs]
-    total = len(runs) * sum(len(t) for t in trials.values())
+    total = sum(len(ts) for run in runs for (table, group), ts in trials.items() if run.plays(table, group))
     rows: list[dict[str, str]] = []
     with tqdm(total=total, desc="trials", unit="trial") as bar:
         for run in runs:
             for table, gl in groups.items():
                 for group in gl:
+                    if not run.plays(table, group.name):
+                        continue
                     ts = trials[table, group.name]
                     n = min(len(ts), opts.max_envs)
                     env = make_eval_env(run.config.task, group, n, opts, cfg.sim, cfg.device)
@@ -142,10 +144,15 @@ def evaluate(cfg: EvalTableCfg) -> tuple[list[dict[str, str]], dict[str, str]]:
         f"{opts.starts} start pose(s) per scene goal; success: within {cfg.radius:g} m within {cfg.time_s:g} s, "
         f"no contact, no fall; sim={cfg.sim}."
     )
+    per_type = [m for m, rs in manifest.methods.items() if rs[0].kind is not None]
     for table, gl in groups.items():
         names = [g.name for g in gl]
-        files[f"{table}.md"] = render_markdown(rows, table, methods, names, note)
-        files[f"{table}.tex"] = render_latex(rows, table, methods, names, note)
+        shown = [m for m in methods if any(r.plays(table, g) for r in manifest.methods[m] for g in names)]
+        text = note
+        if table == "table1" and per_type:
+            text += f" {', '.join(per_type)}: each column played by that type's own checkpoint(s); – = none."
+        files[f"{table}.md"] = render_markdown(rows, table, shown, names, text)
+        files[f"{table}.tex"] = render_latex(rows, table, shown, names, text)
     return rows, files
 
 

@@ -4,15 +4,20 @@
 methods:                  # table row -> one checkpoint per training seed; `hold` = built-in reference policy
   Ours: [runs/a/model_1500.pt, runs/b/model_1500.pt]
   Hold: [hold]
+  Specialists:            # or, for Table I only: scene type -> its own checkpoints (a specialist per column)
+    hurdle-pass: [checkpoints/hurdle_pass/model_2712.pt]
+    crouch-pass: [checkpoints/crouch_pass/model_599.pt]
 table1: {scene_seed: 0}   # optional: the 8 typical types, 10 variants each (paper Table I); `variants: n`
 table2:                   # optional: unseen scene folders (paper Table II), one column per entry
   easy: data/test_unseen/easy
   hard: data/test_unseen/hard
 ```
 
-Everything is checked before any trial runs: unknown keys, a missing checkpoint or ``config.yaml``, an empty
-scene folder, checkpoints of one row trained on different observation layouts. Errors are ``ManifestError``
-with one line naming the offending entry.
+A per-type row plays each Table I column with that type's checkpoints and leaves the types it does not list
+empty ("–"); it has no Table II cells (no one specialist stands for an unseen scene). Everything is checked
+before any trial runs: unknown keys or scene types, a missing checkpoint or ``config.yaml``, an empty scene
+folder, checkpoints of one row (of one type, in a per-type row) trained on different observation layouts, a
+per-type row without ``table1``. Errors are ``ManifestError`` with one line naming the offending entry.
 """
 
 from __future__ import annotations
@@ -26,6 +31,7 @@ import yaml
 from cat.envs.obs_groups import groups_layout
 from cat.learning.config import TrainCfg, policy_model
 from cat.learning.runs import CheckpointError, load_run_config
+from cat.terrain import TYPICAL_KINDS
 
 HOLD = "hold"
 TOP_KEYS = ("methods", "table1", "table2")
@@ -44,6 +50,11 @@ class MethodRun:
     seed: int  # index of the checkpoint in the row (training seed slot)
     checkpoint: str | None
     config: TrainCfg
+    kind: str | None = None  # a per-type row's Table I column; None: every column of every table
+
+    def plays(self, table: str, group: str) -> bool:
+        """Whether this checkpoint is evaluated on column ``group`` of ``table``."""
+        return self.kind is None or (table == "table1" and group == self.kind)
 
 
 @dataclass
@@ -78,6 +89,9 @@ def load_manifest(path: str | os.PathLike) -> Manifest:
     table2 = _table2(raw.get("table2")) if "table2" in raw else {}
     if table1 is None and not table2:
         raise ManifestError("manifest asks for no table: add table1 and/or table2")
+    per_type = [name for name, runs in methods.items() if runs[0].kind is not None]
+    if per_type and table1 is None:
+        raise ManifestError(f"method {per_type[0]!r} gives a checkpoint per scene type, which only table1 has: add table1")
     return Manifest(methods, table1, table2)
 
 
@@ -86,22 +100,39 @@ def _methods(raw) -> dict[str, list[MethodRun]]:
         raise ManifestError("manifest needs 'methods': a mapping of row name -> list of checkpoints (or [hold])")
     out = {}
     for name, entries in raw.items():
-        if isinstance(entries, str):
-            entries = [entries]
-        if not isinstance(entries, list) or not entries:
-            raise ManifestError(f"method {name!r}: expected a list of checkpoints (or [hold]), got {entries!r}")
-        runs = [_method_run(str(name), i, str(e)) for i, e in enumerate(entries)]
-        if len(runs) > 1 and any(r.checkpoint is None for r in runs):
-            raise ManifestError(f"method {name!r}: 'hold' is a row of its own, not mixed with checkpoints")
-        layout = obs_layout(runs[0].config)
-        for r in runs[1:]:
-            if obs_layout(r.config) != layout:
-                raise ManifestError(
-                    f"method {name!r}: checkpoint {r.checkpoint} observation layout {obs_layout(r.config)} "
-                    f"differs from the method's ({runs[0].checkpoint}: {layout})"
-                )
-        out[str(name)] = runs
+        name = str(name)
+        if not isinstance(entries, dict):
+            out[name] = _seed_runs(name, entries, None)
+            continue
+        if not entries:
+            raise ManifestError(f"method {name!r}: a per-type row needs at least one scene type")
+        out[name] = []
+        for kind, kind_entries in entries.items():
+            if kind not in TYPICAL_KINDS:
+                raise ManifestError(f"method {name!r}: unknown scene type {kind!r}; valid: {', '.join(TYPICAL_KINDS)}")
+            out[name] += _seed_runs(name, kind_entries, str(kind))
     return out
+
+
+def _seed_runs(name: str, entries, kind: str | None) -> list[MethodRun]:
+    """One row's (or one type's) checkpoints, one per training seed, sharing an observation layout."""
+    where = f"method {name!r}" + (f" type {kind!r}" if kind else "")
+    if isinstance(entries, str):
+        entries = [entries]
+    if not isinstance(entries, list) or not entries:
+        raise ManifestError(f"{where}: expected a list of checkpoints (or [hold]), got {entries!r}")
+    runs = [_method_run(name, i, str(e)) for i, e in enumerate(entries)]
+    if len(runs) > 1 and any(r.checkpoint is None for r in runs):
+        raise ManifestError(f"{where}: 'hold' is a row of its own, not mixed with checkpoints")
+    layout = obs_layout(runs[0].config)
+    for r in runs:
+        r.kind = kind
+        if obs_layout(r.config) != layout:
+            raise ManifestError(
+                f"{where}: checkpoint {r.checkpoint} observation layout {obs_layout(r.config)} "
+                f"differs from the method's ({runs[0].checkpoint}: {layout})"
+            )
+    return runs
 
 
 def _method_run(method: str, seed: int, entry: str) -> MethodRun:

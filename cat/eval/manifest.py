@@ -91,7 +91,9 @@ def load_manifest(path: str | os.PathLike) -> Manifest:
         raise ManifestError("manifest asks for no table: add table1 and/or table2")
     per_type = [name for name, runs in methods.items() if runs[0].kind is not None]
     if per_type and table1 is None:
-        raise ManifestError(f"method {per_type[0]!r} gives a checkpoint per scene type, which only table1 has: add table1")
+        raise ManifestError(
+            f"method {per_type[0]!r} gives a checkpoint per scene type, which only table1 has: add table1"
+        )
     return Manifest(methods, table1, table2)
 
 

@@ -144,7 +144,7 @@ def evaluate(cfg: EvalTableCfg) -> tuple[list[dict[str, str]], dict[str, str]]:
         f"{opts.starts} start pose(s) per scene goal; success: within {cfg.radius:g} m within {cfg.time_s:g} s, "
         f"no contact, no fall; sim={cfg.sim}."
     )
-    per_type = [m for m, rs in manifest.methods.items() if rs[0].kind is not None]
+    per_type = manifest.per_type_methods()
     for table, gl in groups.items():
         names = [g.name for g in gl]
         shown = [m for m in methods if any(r.plays(table, g) for r in manifest.methods[m] for g in names)]

@@ -63,6 +63,10 @@ class Manifest:
     table1: dict | None = None  # {"scene_seed": int, "variants": int}
     table2: dict[str, str] = field(default_factory=dict)  # column -> scene folder
 
+    def per_type_methods(self) -> list[str]:
+        """Rows that give a checkpoint per Table I scene type (specialists) rather than one for every column."""
+        return [name for name, runs in self.methods.items() if runs[0].kind is not None]
+
 
 def obs_layout(cfg: TrainCfg) -> tuple:
     """What fixes the policy's input: per group it reads (PPO's actor or the distilled student), the terms in
@@ -89,12 +93,13 @@ def load_manifest(path: str | os.PathLike) -> Manifest:
     table2 = _table2(raw.get("table2")) if "table2" in raw else {}
     if table1 is None and not table2:
         raise ManifestError("manifest asks for no table: add table1 and/or table2")
-    per_type = [name for name, runs in methods.items() if runs[0].kind is not None]
+    manifest = Manifest(methods, table1, table2)
+    per_type = manifest.per_type_methods()
     if per_type and table1 is None:
         raise ManifestError(
             f"method {per_type[0]!r} gives a checkpoint per scene type, which only table1 has: add table1"
         )
-    return Manifest(methods, table1, table2)
+    return manifest
 
 
 def _methods(raw) -> dict[str, list[MethodRun]]:
@@ -123,12 +128,11 @@ def _seed_runs(name: str, entries, kind: str | None) -> list[MethodRun]:
         entries = [entries]
     if not isinstance(entries, list) or not entries:
         raise ManifestError(f"{where}: expected a list of checkpoints (or [hold]), got {entries!r}")
-    runs = [_method_run(name, i, str(e)) for i, e in enumerate(entries)]
+    runs = [_method_run(name, i, str(e), kind) for i, e in enumerate(entries)]
     if len(runs) > 1 and any(r.checkpoint is None for r in runs):
         raise ManifestError(f"{where}: 'hold' is a row of its own, not mixed with checkpoints")
     layout = obs_layout(runs[0].config)
-    for r in runs:
-        r.kind = kind
+    for r in runs[1:]:
         if obs_layout(r.config) != layout:
             raise ManifestError(
                 f"{where}: checkpoint {r.checkpoint} observation layout {obs_layout(r.config)} "
@@ -137,9 +141,9 @@ def _seed_runs(name: str, entries, kind: str | None) -> list[MethodRun]:
     return runs
 
 
-def _method_run(method: str, seed: int, entry: str) -> MethodRun:
+def _method_run(method: str, seed: int, entry: str, kind: str | None) -> MethodRun:
     if entry == HOLD:
-        return MethodRun(method, seed, None, TrainCfg())
+        return MethodRun(method, seed, None, TrainCfg(), kind)
     if not (entry.endswith(".pt") or os.sep in entry or "/" in entry):
         raise ManifestError(
             f"method {method!r}: unknown method {entry!r} (a checkpoint path model_*.pt or the built-in 'hold')"
@@ -148,7 +152,7 @@ def _method_run(method: str, seed: int, entry: str) -> MethodRun:
         cfg = load_run_config(entry)
     except CheckpointError as err:
         raise ManifestError(f"method {method!r}: {err}") from err
-    return MethodRun(method, seed, entry, cfg)
+    return MethodRun(method, seed, entry, cfg, kind)
 
 
 def _table1(raw) -> dict:

@@ -208,3 +208,34 @@ def test_teacher_drive_prob_out_of_range_is_refused(env, teachers):
         validate_train_cfg(cfg)  # before any env is built
     with pytest.raises(ValueError, match="teacher_drive_prob must be in"):
         make_runner(cfg, env, None)
+
+
+def test_init_warm_starts_the_student_and_refuses_a_mismatch(teachers, tmp_path):
+    """init= of a distillation: a new run (iteration 0, its own optimiser) whose student starts as the earlier
+    student, so a generalist can grow by scene groups; another network, layout or a PPO policy is refused."""
+    cfg = _generalist_cfg(teachers)
+    cfg.max_iterations, cfg.run_dir = 2, str(tmp_path / "first")
+    first = train(cfg) / "model_1.pt"
+    grown = _generalist_cfg(teachers)
+    grown.max_iterations, grown.run_dir, grown.init = 1, str(tmp_path / "grown"), str(first)
+    grown.algo.distill.learning_rate = 0.0  # the saved student is then exactly the loaded one
+    run = train(grown)
+    its = [int(r["iteration"]) for r in csv.DictReader(open(run / "metrics.csv")) if r["tag"] == "Loss/behavior"]
+    assert its == [0]
+    before = torch.load(first, weights_only=False)["student_state_dict"]
+    after = torch.load(run / "model_0.pt", weights_only=False)["student_state_dict"]
+    assert before.keys() == after.keys()
+    assert all(torch.equal(before[k], after[k]) for k in before if "normalizer" not in k)
+    wider = _generalist_cfg(teachers)
+    wider.init, wider.algo.distill.hidden_dims = str(first), [64, 32]
+    with pytest.raises(ValueError, match=r"its student has algo.distill.hidden_dims=\[32, 32\], this run \[64, 32\]"):
+        validate_train_cfg(wider)
+    shorter = _generalist_cfg(teachers)
+    shorter.init = str(first)
+    shorter.task.observations["student_proprio"].history = 2
+    with pytest.raises(ValueError, match="its student read"):
+        validate_train_cfg(shorter)
+    ppo = _generalist_cfg(teachers)
+    ppo.init = teachers[0]
+    with pytest.raises(ValueError, match="not a PPO policy"):
+        validate_train_cfg(ppo)

@@ -208,6 +208,40 @@ class MultiTeacherDistillation(Distillation):
         return bool(load_cfg.get("iteration", False))
 
 
+def check_student_init(cfg: TrainCfg, init_cfg: TrainCfg, path: str) -> None:
+    """``init=`` of a distillation must be an earlier student of the same network on the same input layout, so a
+    generalist can grow by scene groups as specialists land (one-line ``ValueError`` naming the mismatch)."""
+    if init_cfg.algo.name != "distill":
+        raise ValueError(f"init={path}: a distillation starts from an earlier student, not a {init_cfg.algo.name} run")
+    have, need = init_cfg.algo.distill, cfg.algo.distill
+    wanted = {
+        "algo.distill.student": (need.student, have.student),
+        "algo.distill.hidden_dims": (list(need.hidden_dims), list(have.hidden_dims)),
+        "algo.activation": (cfg.algo.activation, init_cfg.algo.activation),
+        "algo.obs_normalization": (cfg.algo.obs_normalization, init_cfg.algo.obs_normalization),
+    }
+    if need.student == "lstm":
+        wanted["algo.distill.rnn_hidden_dim"] = (need.rnn_hidden_dim, have.rnn_hidden_dim)
+        wanted["algo.distill.rnn_num_layers"] = (need.rnn_num_layers, have.rnn_num_layers)
+    for key, (now, then) in wanted.items():
+        if now != then:
+            raise ValueError(f"init={path}: its student has {key}={then}, this run {now}")
+    then = groups_layout(init_cfg.task, list(have.student_groups))
+    now = groups_layout(cfg.task, list(need.student_groups))
+    if then != now:
+        raise ValueError(f"init={path}: its student read {then}, this run's student groups give {now}")
+
+
+def load_student_init(alg: Distillation, ckpt: dict, path: str) -> None:
+    """The student's weights (normaliser included) from ``ckpt``; the optimiser and iteration start fresh."""
+    try:
+        alg.load(ckpt, load_cfg={"student": True}, strict=True)
+    except RuntimeError as err:
+        first = str(err).splitlines()[0]
+        raise ValueError(f"init={path}: the student does not fit this run's ({first})") from err
+    log.info("init: the student starts from %s", os.path.basename(path))
+
+
 def distill_runner_cfg(cfg: TrainCfg, group_names: list[str]) -> dict:
     """rsl_rl ``DistillationRunner`` config of a distillation run (student, multi-teacher, algorithm)."""
     from cat.learning.config import student_model_cfg

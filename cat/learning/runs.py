@@ -19,7 +19,13 @@ from cat.envs.obs_groups import resolve_groups, upgrade_legacy_observations
 from cat.envs.sim import check_backend
 from cat.envs.traversal_env import TraversalEnv
 from cat.learning.config import ALGOS, TrainCfg, check_obs_groups, policy_model, runner_cfg, student_model_cfg
-from cat.learning.distill import check_teachers, distill_runner_cfg, load_specialists
+from cat.learning.distill import (
+    check_student_init,
+    check_teachers,
+    distill_runner_cfg,
+    load_specialists,
+    load_student_init,
+)
 from cat.learning.finetune import (
     check_actor_matches_student,
     install_critic_warmup,
@@ -194,8 +200,6 @@ def validate_train_cfg(cfg: TrainCfg) -> None:
             raise ValueError(f"algo.distill.teacher_drive_prob must be in [0, 1], got {d.teacher_drive_prob}")
         if not cfg.teachers:
             raise ValueError("algo=distill needs teachers=[<specialist checkpoint>,...]")
-        if cfg.init:
-            raise ValueError("init= initialises PPO runs; a distillation starts its student fresh (or resume=)")
         if cfg.algo.symmetry_augment or cfg.algo.mirror_loss_coeff > 0:
             raise ValueError("rsl_rl's Distillation rejects symmetry: set algo.symmetry_augment=false")
     elif cfg.teachers:
@@ -210,7 +214,14 @@ def validate_train_cfg(cfg: TrainCfg) -> None:
                 f"resume={path}: it holds no optimiser state (shipped with weights_only=true), so the run cannot "
                 "continue exactly; start a new run from it with init= instead"
             )
-        if not cfg.resume and is_student_checkpoint(ckpt):
+        if not cfg.resume and cfg.algo.name == "distill":
+            if not is_student_checkpoint(ckpt):
+                raise ValueError(
+                    f"init={path}: a distillation starts from an earlier student (a distillation checkpoint), "
+                    "not a PPO policy; name PPO specialists in teachers=[...]"
+                )
+            check_student_init(cfg, load_run_config(path), str(path))
+        elif not cfg.resume and is_student_checkpoint(ckpt):
             check_actor_matches_student(cfg, load_run_config(path), str(path))
 
 
@@ -381,6 +392,8 @@ def _train_in(cfg: TrainCfg, env: TraversalEnv, run_dir: Path) -> Path:
         if dropped:
             log.info("metrics.csv: dropped %d rows logged after the checkpoint (redone now)", dropped)
         log.info("resumed %s at iteration %d", cfg.resume, runner.current_learning_iteration)
+    elif cfg.init and cfg.algo.name == "distill":
+        load_student_init(runner.alg, read_checkpoint(cfg.init), cfg.init)  # a generalist grows by scene groups
     elif cfg.init and is_student_checkpoint(ckpt := read_checkpoint(cfg.init)):
         # the student knows its inputs: nothing to adapt (finetune.py)
         load_student_as_actor(runner, ckpt, cfg.init, cfg.algo.init_noise_std)

@@ -11,7 +11,7 @@ import torch
 
 from cat.envs.config import ACTOR_TERMS, EnvCfg, ObsGroupCfg
 from cat.learning.config import AlgoCfg, DistillCfg, TrainCfg, policy_model
-from cat.learning.distill import MultiTeacher, TeacherError, check_teachers, load_specialists
+from cat.learning.distill import MultiTeacher, TeacherError, check_teachers, distill_runner_cfg, load_specialists
 from cat.learning.runs import load_policy, make_env, make_runner, resume_config, save_config, train, validate_train_cfg
 
 KINDS = ["hurdle-crouch", "side-pass"]
@@ -239,3 +239,19 @@ def test_init_warm_starts_the_student_and_refuses_a_mismatch(teachers, tmp_path)
     ppo.init = teachers[0]
     with pytest.raises(ValueError, match="not a PPO policy"):
         validate_train_cfg(ppo)
+
+
+def test_labels_are_clipped_as_the_env_clips_actions(env, tmp_path):
+    """A specialist's mean may leave the action range; the label is the action the env executes."""
+    wide = [_teacher(tmp_path / "hc", KINDS[0], 3.0, env), _teacher(tmp_path / "sp", KINDS[1], -0.5, env)]
+    obs = env.get_observations()
+    group = obs["route"][:, 0].long()
+    raw = MultiTeacher(obs, {"teacher": ["teacher"]}, "teacher", env.num_actions, wide, KINDS, "route")
+    clipped = MultiTeacher(obs, {"teacher": ["teacher"]}, "teacher", env.num_actions, wide, KINDS, "route", 1.0)
+    assert torch.allclose(raw(obs)[group == 0], torch.tensor(3.0))
+    assert torch.allclose(clipped(obs)[group == 0], torch.tensor(1.0))
+    assert torch.allclose(clipped(obs)[group == 1], torch.tensor(-0.5))  # inside the range: unchanged
+    with pytest.raises(ValueError, match="action_clip must be positive"):
+        MultiTeacher(obs, {"teacher": ["teacher"]}, "teacher", env.num_actions, wide, KINDS, "route", 0.0)
+    runner_teacher = distill_runner_cfg(_generalist_cfg(wide), KINDS)["teacher"]
+    assert runner_teacher["action_clip"] == EnvCfg().action_clip  # the run's labels follow task.action_clip

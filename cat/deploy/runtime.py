@@ -419,7 +419,10 @@ class Runtime:
 
     # --- loops ----------------------------------------------------------------------------------------------
     def start_perception(self) -> None:
+        """Real time: one perception cycle now, then the thread. The first cycle compiles Warp's kernels on a cold
+        cache (seconds), which must not run on the robot's clock before its first map and field."""
         if self.deploy.realtime:
+            self.perception.cycle(self.snapshot())
             self.perception.start(self.snapshot)
 
     def stop(self) -> None:

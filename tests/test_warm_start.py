@@ -60,7 +60,7 @@ def _prior_in_scene(tmp_path, probe_steps: int):
             "task.scene_variants=1",
             "task.warmup_variants=1",
             "task.terminations.on_collision=false",  # count falls, not touches
-            "num_envs=16",
+            "num_envs=64",
             f"run_root={tmp_path}",
         ]
     )
@@ -96,5 +96,7 @@ def test_probe_detaches_only_columns_the_prior_saw_constant_and_the_prior_walks(
     assert not (zeroed & ~constant).any()  # (the held arm joints were constant to it too)
     env_r, alg_r, zeroed_at_reset, _ = _prior_in_scene(tmp_path / "reset", probe_steps=0)
     assert int(zeroed.sum()) > int(zeroed_at_reset.sum())  # the probe saw columns the reset poses did not
-    falls, falls_reset_only = _falls(env, alg, 150), _falls(env_r, alg_r, 150)  # 16 robots, 3 s
-    assert falls <= 4 and falls < falls_reset_only
+    # 64 robots, 3 s: at most a quarter fall with the probe, against about one fall per robot without it. (16 robots
+    # were too few: the count is one draw of a chaotic rollout, 4 on one CPU and 7 on another for the same seeds)
+    falls, falls_reset_only = _falls(env, alg, 150), _falls(env_r, alg_r, 150)
+    assert falls <= env.num_envs // 4 and 2 * falls < falls_reset_only, (falls, falls_reset_only)

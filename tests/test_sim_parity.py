@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import copy
 import logging
+import os
 
 import mujoco
 import numpy as np
@@ -40,6 +41,8 @@ from cat.envs.sim.mujoco_backend import MujocoBackend
 from cat.envs.sim.warp_backend import WarpBackend, resolve_device
 
 log = logging.getLogger(__name__)
+
+WARP_DEVICE = os.environ.get("CAT_WARP_TEST_DEVICE", "cpu")  # cuda:0 on a lent GPU (scripts/gpu/check.sh)
 
 STEPS = 50
 OBSTACLE_X = 5.0
@@ -168,7 +171,7 @@ def run_scenario(model, cfg, scenario: str):
         qpos[0, 0] = OBSTACLE_X  # world 0 between the wall and the wedge, both hands pressed 1 cm in
     ctrl = actions(cfg, n, STEPS)
     ref = rollout(MujocoBackend(model, n, cfg.decimation), qpos, qvel, ctrl)
-    warp = WarpBackend(model, n, cfg.decimation, device="cpu")
+    warp = WarpBackend(model, n, cfg.decimation, device=WARP_DEVICE)
     got = rollout(warp, qpos, qvel, ctrl)
     warp.check_overflow()
     assert (got["qpos"][:, :, 2] > 0.6).all()  # the robots stand: a fall would make the comparison moot
@@ -194,7 +197,7 @@ def test_graph_replay_matches_eager_launches(model, robot_cfg):
     qpos, qvel = initial_states(robot_cfg, n)
     qpos[0, 0] = OBSTACLE_X  # contacts with the box and the mesh
     ctrl = torch.as_tensor(actions(robot_cfg, n, 10), dtype=torch.float32)
-    backends = [WarpBackend(model, n, robot_cfg.decimation, device="cpu", graph=g) for g in (True, False)]
+    backends = [WarpBackend(model, n, robot_cfg.decimation, device=WARP_DEVICE, graph=g) for g in (True, False)]
     assert backends[0]._step_graph is not None and backends[1]._step_graph is None
     qpos, qvel = torch.as_tensor(qpos), torch.as_tensor(qvel)
     for k, u in enumerate(ctrl):
@@ -239,7 +242,7 @@ def test_reset_subset_leaves_other_worlds_untouched(model, robot_cfg):
     n = 4
     qpos, qvel = initial_states(robot_cfg, n)
     ctrl = torch.as_tensor(actions(robot_cfg, n, 12), dtype=torch.float32)
-    a, twin = (WarpBackend(model, n, robot_cfg.decimation, device="cpu") for _ in range(2))
+    a, twin = (WarpBackend(model, n, robot_cfg.decimation, device=WARP_DEVICE) for _ in range(2))
     for backend in (a, twin):
         backend.reset(torch.arange(n), torch.as_tensor(qpos), torch.as_tensor(qvel))
         for u in ctrl[:6]:
@@ -265,7 +268,7 @@ def test_reset_subset_leaves_other_worlds_untouched(model, robot_cfg):
         torch.testing.assert_close(a.sensordata[ids][:, c].double(), ref.sensordata[:, c], atol=tol, rtol=0)
 
     # a fresh backend reset to the same states: the reset worlds carry no hidden state over (warmstart, ...)
-    fresh = WarpBackend(model, n, robot_cfg.decimation, device="cpu")
+    fresh = WarpBackend(model, n, robot_cfg.decimation, device=WARP_DEVICE)
     fresh.reset(torch.arange(n), a.qpos.clone(), a.qvel.clone())
     assert torch.equal(fresh.sensordata[ids], a.sensordata[ids])
     for u in ctrl[6:]:

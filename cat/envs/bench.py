@@ -2,6 +2,8 @@
 
 Env steps include observations, rewards, terminations and auto-resets (the policy is excluded: actions are
 uniform noise). Raw is MuJoCo C ``rollout`` on all cores, same model, same decimation, measured in the same run.
+``--device cuda:0`` runs the warp backend there (MuJoCo C always runs on the CPU); ``--envs`` replaces the default
+sizes, e.g. ``--backends warp --device cuda:0 --envs 1024 4096 16384`` on a GPU.
 """
 
 from __future__ import annotations
@@ -23,13 +25,22 @@ SIZES = {"mujoco": (64, 256, 1024), "warp": (64, 256)}
 
 
 def env_rate(env: TraversalEnv, seconds: float) -> float:
+    """Env steps/s under uniform random actions (drawn on the CPU, moved to the env's device); CUDA is
+    synchronised before the clock stops."""
     gen = torch.Generator().manual_seed(0)
+    sync = torch.cuda.synchronize if env.device.type == "cuda" else (lambda: None)
+
+    def act(scale: float) -> torch.Tensor:
+        return (scale * (2 * torch.rand(env.num_envs, env.num_actions, generator=gen) - 1)).to(env.device)
+
     for _ in range(3):  # warm-up (and Warp compile)
-        env.step(2 * torch.rand(env.num_envs, env.num_actions, generator=gen) - 1)
+        env.step(act(1.0))
+    sync()
     steps, start = 0, time.perf_counter()
     while time.perf_counter() - start < seconds:
-        env.step(0.3 * (2 * torch.rand(env.num_envs, env.num_actions, generator=gen) - 1))
+        env.step(act(0.3))
         steps += 1
+    sync()
     return steps * env.num_envs / (time.perf_counter() - start)
 
 
@@ -60,12 +71,23 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="bench.py sim", description=__doc__)
     parser.add_argument("--backends", nargs="+", default=["mujoco", "warp"])
     parser.add_argument("--seconds", type=float, default=3.0)
+    parser.add_argument("--envs", type=int, nargs="+", default=None, help="env counts (default: per backend)")
+    parser.add_argument("--device", default="cpu", help="cpu or cuda[:i], for sim=warp")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.WARNING)
+    from cat.fields.bench import bench_device
+
+    device = bench_device(args.device)
+    if device != "cpu" and "mujoco" in args.backends:
+        raise SystemExit(f"--device {args.device}: MuJoCo C runs on the CPU; use --backends warp")
     for backend in args.backends:
-        for n in SIZES[backend]:
-            env = TraversalEnv(EnvCfg(num_envs=n), sim=backend)
+        for n in args.envs or SIZES[backend]:
+            env = TraversalEnv(EnvCfg(num_envs=n), sim=backend, device=device)
             x = env_rate(env, args.seconds)
             y = raw_rate(env.sim.model, n, env.robot.decimation, args.seconds)
-            print(f"sim={backend} num_envs={n} env_steps_per_s={x:.0f} raw_env_steps_per_s={y:.0f} ratio={x / y:.2f}")
+            print(
+                f"sim={backend} num_envs={n} env_steps_per_s={x:.0f} raw_env_steps_per_s={y:.0f} ratio={x / y:.2f}"
+                f" device={device}",
+                flush=True,
+            )
             del env

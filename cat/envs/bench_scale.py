@@ -15,6 +15,10 @@ per-world scene models — env steps/s (and the flat task's), model memory, buil
 ``--sim warp`` runs both on mujoco_warp (per-world scenes as geom slots, ``cat.envs.sim.warp_slots``).
 ``case=scale_dr`` gives domain randomisation's model memory: per-world pools (scenes x ``--pool`` copies,
 built) against the tiles' per-env copy of the whole tiled model (projected from one copy).
+
+``--device cuda:0`` puts the bank (and, with ``--sim warp``, the envs) on that device; query timings synchronise
+it. ``--no-env`` stops after the bank's memory, load and query figures (``env_steps_per_s`` and the ratio are then
+not printed).
 """
 
 from __future__ import annotations
@@ -34,6 +38,7 @@ from cat.envs.scene_models import WorldModels
 from cat.envs.scene_set import SceneSet
 from cat.envs.traversal_env import TraversalEnv
 from cat.fields import FieldBank, FieldCfg, Grid, SceneFields, SceneLayout, StaleFieldError, bank_bytes, build_fields
+from cat.fields.bench import bench_device, median_ms
 from cat.fields.store import STORE_FILE
 from cat.terrain import Scene, make_indoor, make_procedural, make_typical
 
@@ -86,21 +91,17 @@ def scene_list(folders: dict[str, list[Path]], counts: dict[str, int]) -> list[P
 
 def query_ms(bank: FieldBank, envs: int, repeat: int, seed: int = 0) -> float:
     """Median ms of ``bank.query`` for ``envs`` × 13 links: each env on a random field, its links within
-    ±0.35 m (±0.7 m in z) of a pelvis placed at random in the field's grid."""
+    ±0.35 m (±0.7 m in z) of a pelvis placed at random in the field's grid (points made on the CPU, queried
+    on the bank's device)."""
     rng = np.random.default_rng(seed)
     idx = torch.as_tensor(rng.integers(0, bank.num_fields, envs), dtype=torch.int32)
-    lo, hi = bank.field_bounds(idx)
+    lo, hi = (b.cpu() for b in bank.field_bounds(idx.to(bank.device)))
     root = lo + torch.as_tensor(rng.uniform(0.1, 0.9, (envs, 3)), dtype=torch.float32) * (hi - lo)
     root[:, 2] = 0.75
     off = torch.as_tensor(rng.uniform(-0.35, 0.35, (envs, 13, 3)), dtype=torch.float32) * torch.tensor([1, 1, 2.0])
-    pts = root[:, None] + off
+    idx, pts = idx.to(bank.device), (root[:, None] + off).to(bank.device)
     out = bank.query(idx, pts)
-    times = []
-    for _ in range(repeat):
-        t = time.perf_counter()
-        bank.query(idx, pts, out)
-        times.append(time.perf_counter() - t)
-    return 1e3 * float(np.median(times))
+    return median_ms(lambda: bank.query(idx, pts, out), repeat, bank.device)
 
 
 class _FieldsOnly(SceneSet):
@@ -128,11 +129,16 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--physics-scenes", type=int, default=24, help="case=scale_physics set size (0: skip)")
     p.add_argument("--pool", type=int, default=8, help="domain randomisation pool per scene (case=scale_dr)")
     p.add_argument("--only-physics", action="store_true", help="run case=scale_physics / scale_dr only")
+    p.add_argument("--device", default="cpu", help="cpu or cuda[:i]: the bank's device (and the envs', sim=warp)")
+    p.add_argument("--no-env", action="store_true", help="case=scale: bank memory, load and query only")
     args = p.parse_args(argv)
     logging.basicConfig(level=logging.WARNING)
     import warp as wp
 
     wp.config.log_level = wp.LOG_WARNING  # keep stdout to result lines
+    args.device = bench_device(args.device)
+    if args.device != "cpu" and args.sim == "mujoco" and not (args.no_env and args.physics_scenes == 0):
+        raise SystemExit(f"--device {args.device}: MuJoCo C envs run on the CPU; add --sim warp (or --no-env)")
 
     unique = unique_scenes(Path(args.data), args.dtype)
     torch.set_num_threads(1)
@@ -164,14 +170,22 @@ def scale_case(unique: dict[str, list[Path]], args: argparse.Namespace) -> None:
         return SceneFields.load(Scene.fields_dir(folders[i]) / STORE_FILE, FieldCfg())
 
     t = time.perf_counter()
+    kw = dict(dtype=args.dtype, device=args.device)
     if args.per_world:
-        sset = SceneSet([Scene.load(f) for f in folders], load, args.envs, dtype=args.dtype, per_world=True)
+        sset = SceneSet([Scene.load(f) for f in folders], load, args.envs, per_world=True, **kw)
     else:
-        sset = _FieldsOnly([scenes_u[f] for f in folders], load, args.envs, dtype=args.dtype)
+        sset = _FieldsOnly([scenes_u[f] for f in folders], load, args.envs, **kw)
     load_s = time.perf_counter() - t
     q = query_ms(sset.bank, args.query_envs, args.repeat)
-    env = TraversalEnv(EnvCfg(num_envs=args.envs), sim=args.sim, scenes=sset, seed=0)
-    flat = TraversalEnv(EnvCfg(num_envs=args.envs), sim=args.sim, seed=0)
+    if args.no_env:
+        print(
+            f"case=scale scenes={len(folders)} goals={GOALS} bank_mb={sset.bank.nbytes / 2**20:.0f}"
+            f" load_s={load_s:.1f} query_ms={q:.2f} device={args.device}",
+            flush=True,
+        )
+        return
+    env = TraversalEnv(EnvCfg(num_envs=args.envs), sim=args.sim, device=args.device, scenes=sset, seed=0)
+    flat = TraversalEnv(EnvCfg(num_envs=args.envs), sim=args.sim, device=args.device, seed=0)
     rates: dict[str, list[float]] = {"set": [], "flat": []}
     for _ in range(args.rounds):  # interleaved: both see the same machine load
         rates["set"].append(env_rate(env, args.seconds / args.rounds))
@@ -180,7 +194,8 @@ def scale_case(unique: dict[str, list[Path]], args: argparse.Namespace) -> None:
     print(
         f"case=scale scenes={len(folders)} goals={GOALS} bank_mb={sset.bank.nbytes / 2**20:.0f} load_s={load_s:.1f}"
         f" query_ms={q:.2f} env_steps_per_s={rate:.0f} flat_env_steps_per_s={flat_rate:.0f}"
-        f" ratio={rate / flat_rate:.2f} physics={'per_world' if args.per_world else 'none'} sim={args.sim}",
+        f" ratio={rate / flat_rate:.2f} physics={'per_world' if args.per_world else 'none'} sim={args.sim}"
+        f" device={args.device}",
         flush=True,
     )
 
@@ -197,10 +212,10 @@ def physics_case(unique: dict[str, list[Path]], args: argparse.Namespace) -> Non
     envs, build_s = {}, {}
     for mode in ("tiles", "per_world"):
         t = time.perf_counter()
-        sset = SceneSet(scenes, load, args.envs, dtype=args.dtype, per_world=mode == "per_world")
-        envs[mode] = TraversalEnv(EnvCfg(num_envs=args.envs), sim=args.sim, scenes=sset, seed=0)
+        sset = SceneSet(scenes, load, args.envs, args.device, dtype=args.dtype, per_world=mode == "per_world")
+        envs[mode] = TraversalEnv(EnvCfg(num_envs=args.envs), sim=args.sim, device=args.device, scenes=sset, seed=0)
         build_s[mode] = time.perf_counter() - t
-    envs["flat"] = TraversalEnv(EnvCfg(num_envs=args.envs), sim=args.sim, seed=0)
+    envs["flat"] = TraversalEnv(EnvCfg(num_envs=args.envs), sim=args.sim, device=args.device, seed=0)
     rates: dict[str, list[float]] = {m: [] for m in envs}
     for _ in range(args.rounds):  # interleaved: both see the same machine load
         for m, env in envs.items():
@@ -211,7 +226,8 @@ def physics_case(unique: dict[str, list[Path]], args: argparse.Namespace) -> Non
     tile_mb, scene_mb = tiles.sim.model.nbuffer / 2**20, wm.nbytes / 2**20
     layouts = getattr(envs["per_world"].sim, "num_layouts", 1)  # MjData layout classes (MuJoCo C)
     print(
-        f"case=scale_physics sim={args.sim} scenes={len(scenes)} envs={args.envs} layouts={layouts}"
+        f"case=scale_physics sim={args.sim} device={args.device} scenes={len(scenes)} envs={args.envs}"
+        f" layouts={layouts}"
         f" tiles_env_steps_per_s={rate['tiles']:.0f} per_world_env_steps_per_s={rate['per_world']:.0f}"
         f" ratio={rate['per_world'] / rate['tiles']:.2f} flat_env_steps_per_s={rate['flat']:.0f}"
         f" tile_model_mb={tile_mb:.1f} per_world_models_mb={scene_mb:.1f}"

@@ -1,5 +1,6 @@
 """Fields benchmark (``python scripts/bench.py fields``): full rebuild vs a scikit-fmm/numpy reference,
-and the 4096-env × 13-link query. Prints one line per case (the only stdout output)."""
+and the 4096-env × 13-link query. Prints one line per case (the only stdout output). ``--device cuda:0`` builds
+and queries on that device (timings synchronise it); the reference build always runs on the CPU."""
 
 from __future__ import annotations
 
@@ -34,44 +35,66 @@ def reference_build(occ: np.ndarray, grid: Grid, goal, cfg: FieldCfg) -> np.ndar
     return -np.stack(np.gradient(u, h), axis=-1)
 
 
-def _median_ms(fn, repeat: int) -> float:
+def median_ms(fn, repeat: int, device: str | torch.device = "cpu") -> float:
+    """Median wall-clock ms of ``fn()`` over ``repeat`` calls; on CUDA each call is synchronised, so the figure
+    is the work's, not the launch's."""
+    sync = torch.cuda.synchronize if torch.device(device).type == "cuda" else (lambda: None)
     ts = []
     for _ in range(repeat):
+        sync()
         t0 = time.perf_counter()
         fn()
+        sync()
         ts.append((time.perf_counter() - t0) * 1e3)
     return float(np.median(ts))
 
 
-def bench_build(name: str, occ: np.ndarray, grid: Grid, goal, repeat: int) -> None:
+def bench_device(device: str) -> str:
+    """``device`` checked for the benches: 'cpu' or a CUDA device torch and Warp both see (else one clear line)."""
+    if device == "cpu":
+        return device
+    from cat.envs.sim.warp_backend import resolve_device
+
+    try:
+        name = resolve_device(device)
+    except (RuntimeError, ValueError) as err:
+        raise SystemExit(f"--device {device}: {err}") from None
+    if not torch.cuda.is_available():
+        raise SystemExit(f"--device {device}: this torch build has no CUDA (torch {torch.__version__})")
+    return name
+
+
+def bench_build(name: str, occ: np.ndarray, grid: Grid, goal, repeat: int, device: str = "cpu") -> None:
     cfg = FieldCfg()
-    build_field(occ, grid, goal, cfg)  # compile / load kernels, allocate workspaces
-    ours = _median_ms(lambda: build_field(occ, grid, goal, cfg), repeat)
-    ref = _median_ms(lambda: reference_build(occ, grid, goal, cfg), max(1, repeat // 2))
+    build_field(occ, grid, goal, cfg, device=device)  # compile / load kernels, allocate workspaces
+    ours = median_ms(lambda: build_field(occ, grid, goal, cfg, device=device), repeat, device)
+    ref = median_ms(lambda: reference_build(occ, grid, goal, cfg), max(1, repeat // 2))
     nx, ny, nz = grid.shape
     print(
-        f"case={name} grid={nx}x{ny}x{nz} build_ms={ours:.1f} reference_ms={ref:.1f} speedup={ref / ours:.2f}",
+        f"case={name} grid={nx}x{ny}x{nz} build_ms={ours:.1f} reference_ms={ref:.1f} speedup={ref / ours:.2f}"
+        f" device={device}",
         flush=True,
     )
 
 
-def bench_query(envs: int, links: int, n_fields: int, repeat: int, name: str = "query") -> None:
+def bench_query(envs: int, links: int, n_fields: int, repeat: int, name: str = "query", device: str = "cpu") -> None:
     """Bank of ``n_fields`` typical-scene fields (different goals; 4.5 MB each); each env's links within
     ±0.35 m (±0.7 m in z) of its pelvis, envs spread over the course and over the fields. The query is
     a memory-bound gather: a bank larger than the caches is the realistic training case."""
     occ = hurdle_crouch()
     rng = np.random.default_rng(0)
     goals = [(2.0, y, 0.75) for y in np.linspace(-0.6, 0.6, n_fields)]
-    bank = FieldBank.from_fields([build_field(occ, TYPICAL_GRID, g) for g in goals])
+    bank = FieldBank.from_fields([build_field(occ, TYPICAL_GRID, g) for g in goals], device=device)
     idx = torch.as_tensor(rng.integers(0, n_fields, envs), dtype=torch.int32)
     root = torch.as_tensor(rng.uniform([-0.3, -0.8, 0.7], [2.3, 0.8, 0.8], (envs, 1, 3)), dtype=torch.float32)
     pts = root + torch.as_tensor(rng.uniform(-0.35, 0.35, (envs, links, 3)), dtype=torch.float32) * torch.tensor(
         [1.0, 1.0, 2.0]
     )
+    idx, pts = idx.to(device), pts.to(device)
     out = bank.query(idx, pts)
-    ms = _median_ms(lambda: bank.query(idx, pts, out), repeat)
+    ms = median_ms(lambda: bank.query(idx, pts, out), repeat, device)
     extra = "" if name == "query" else f" fields={n_fields}"
-    print(f"case={name} envs={envs} links={links}{extra} query_ms={ms:.2f}", flush=True)
+    print(f"case={name} envs={envs} links={links}{extra} query_ms={ms:.2f} device={device}", flush=True)
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -79,15 +102,17 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--repeat", type=int, default=7, help="timed repetitions per case (median reported)")
     p.add_argument("--envs", type=int, default=4096)
     p.add_argument("--fields", type=int, default=8, help="fields in the query bank")
+    p.add_argument("--device", default="cpu", help="cpu or cuda[:i]: where fields are built and queried")
     args = p.parse_args(argv)
     import warp as wp
 
     wp.config.log_level = getattr(wp, "LOG_WARNING", wp.config.log_level)  # keep stdout to result lines
     torch.set_num_threads(1)
-    bench_build("typical", hurdle_crouch(), TYPICAL_GRID, TYPICAL_GOAL, args.repeat)
-    bench_build("window", cluttered_window(), WINDOW_GRID, (0.0, 0.0, 0.75), args.repeat)
-    bench_query(args.envs, 13, args.fields, args.repeat * 5)
-    bench_query(args.envs, 13, 1, args.repeat * 5, name="query_1field")
+    dev = bench_device(args.device)
+    bench_build("typical", hurdle_crouch(), TYPICAL_GRID, TYPICAL_GOAL, args.repeat, dev)
+    bench_build("window", cluttered_window(), WINDOW_GRID, (0.0, 0.0, 0.75), args.repeat, dev)
+    bench_query(args.envs, 13, args.fields, args.repeat * 5, device=dev)
+    bench_query(args.envs, 13, 1, args.repeat * 5, name="query_1field", device=dev)
 
 
 if __name__ == "__main__":

@@ -191,11 +191,12 @@ def scale_case(unique: dict[str, list[Path]], args: argparse.Namespace) -> None:
         rates["set"].append(env_rate(env, args.seconds / args.rounds))
         rates["flat"].append(env_rate(flat, args.seconds / args.rounds))
     rate, flat_rate = (float(np.median(rates[k])) for k in ("set", "flat"))
+    per_round = np.array(rates["set"]) / np.array(rates["flat"])  # the spread a single ratio hides
     print(
         f"case=scale scenes={len(folders)} goals={GOALS} bank_mb={sset.bank.nbytes / 2**20:.0f} load_s={load_s:.1f}"
         f" query_ms={q:.2f} env_steps_per_s={rate:.0f} flat_env_steps_per_s={flat_rate:.0f}"
-        f" ratio={rate / flat_rate:.2f} physics={'per_world' if args.per_world else 'none'} sim={args.sim}"
-        f" device={args.device}",
+        f" ratio={rate / flat_rate:.2f} round_ratios={per_round.min():.2f}-{per_round.max():.2f}"
+        f" physics={'per_world' if args.per_world else 'none'} sim={args.sim} device={args.device}",
         flush=True,
     )
 

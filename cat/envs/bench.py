@@ -20,6 +20,7 @@ from mujoco import rollout
 
 from cat.envs.config import EnvCfg
 from cat.envs.traversal_env import TraversalEnv
+from cat.fields.bench import bench_device, device_sync
 
 SIZES = {"mujoco": (64, 256, 1024), "warp": (64, 256)}
 
@@ -28,7 +29,7 @@ def env_rate(env: TraversalEnv, seconds: float) -> float:
     """Env steps/s under uniform random actions (drawn on the CPU, moved to the env's device); CUDA is
     synchronised before the clock stops."""
     gen = torch.Generator().manual_seed(0)
-    sync = torch.cuda.synchronize if env.device.type == "cuda" else (lambda: None)
+    sync = device_sync(env.device)
 
     def act(scale: float) -> torch.Tensor:
         return (scale * (2 * torch.rand(env.num_envs, env.num_actions, generator=gen) - 1)).to(env.device)
@@ -75,8 +76,6 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--device", default="cpu", help="cpu or cuda[:i], for sim=warp")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.WARNING)
-    from cat.fields.bench import bench_device
-
     device = bench_device(args.device)
     if device != "cpu" and "mujoco" in args.backends:
         raise SystemExit(f"--device {args.device}: MuJoCo C runs on the CPU; use --backends warp")

@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 import logging
 import time
+from collections.abc import Callable
 
 import numpy as np
 import torch
@@ -35,10 +36,15 @@ def reference_build(occ: np.ndarray, grid: Grid, goal, cfg: FieldCfg) -> np.ndar
     return -np.stack(np.gradient(u, h), axis=-1)
 
 
+def device_sync(device: str | torch.device) -> Callable[[], None]:
+    """What waits for ``device``'s queued work before a clock is read: ``torch.cuda.synchronize``, or nothing."""
+    return torch.cuda.synchronize if torch.device(device).type == "cuda" else (lambda: None)
+
+
 def median_ms(fn, repeat: int, device: str | torch.device = "cpu") -> float:
     """Median wall-clock ms of ``fn()`` over ``repeat`` calls; on CUDA each call is synchronised, so the figure
     is the work's, not the launch's."""
-    sync = torch.cuda.synchronize if torch.device(device).type == "cuda" else (lambda: None)
+    sync = device_sync(device)
     ts = []
     for _ in range(repeat):
         sync()

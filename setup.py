@@ -27,6 +27,9 @@ setup(
         "pytorch-kinematics>=0.7",
         "rerun-sdk==0.41.0",
         "hydra-core>=1.3",
+        # hydra/launcher=joblib (parallel processes) and submitit_local / submitit_slurm (docs/experiments.md)
+        "hydra-joblib-launcher>=1.2",
+        "hydra-submitit-launcher>=1.2",
         "omegaconf>=2.3",
         "scikit-image>=0.22",
         "pyyaml>=6.0",

@@ -1,9 +1,11 @@
 """Command-line front end shared by the scripts: hydra-style overrides with what hydra users type.
 
 ``key=value`` overrides, ``--help`` / ``-h``, ``--cfg job`` (print the resolved config, build nothing), ``-m`` /
-``--multirun`` (one job per combination of comma-separated values, in sequence), ``hydra.run.dir=<dir>`` and
-``hydra.sweep.dir=<dir>`` (mapped to a script's own output key). Any failure is one line on stderr and exit
-code 2: unknown keys answer with the closest valid names.
+``--multirun`` (one job per combination of comma-separated values, in sequence in this process, or through
+hydra's launcher plugins with ``hydra/launcher=joblib|submitit_local|submitit_slurm|...`` and
+``hydra.launcher.<key>=`` settings: ``cat/launcher.py``), ``hydra.run.dir=<dir>`` and ``hydra.sweep.dir=<dir>``
+(mapped to a script's own output key). Every job is validated before the first runs. Any failure is one line on
+stderr and exit code 2: unknown keys answer with the closest valid names.
 """
 
 from __future__ import annotations
@@ -36,6 +38,9 @@ class Script:
     groups: dict[str, list[str]] = field(default_factory=dict)  # config group -> options, for --help
     keys: list[str] = field(default_factory=list)  # common keys, for --help
     errors: tuple[type[BaseException], ...] = ()  # exception types reported as one line
+    # job(config, launcher overrides): the script launches jobs itself (scripts/experiment.py), so hydra/launcher=
+    # and hydra.launcher.<key>= reach it without -m
+    uses_launcher: bool = False
 
 
 def valid_keys(schema, prefix: str = "") -> list[str]:
@@ -75,7 +80,14 @@ def expand_sweep(overrides: list[str]) -> list[list[str]]:
 
 
 def _split(argv: list[str]) -> tuple[dict[str, Any], list[str]]:
-    flags: dict[str, Any] = {"help": False, "cfg": None, "multirun": False, "run_dir": None, "sweep_dir": None}
+    flags: dict[str, Any] = {
+        "help": False,
+        "cfg": None,
+        "multirun": False,
+        "run_dir": None,
+        "sweep_dir": None,
+        "launcher": [],  # hydra/launcher=<name>, hydra.launcher.<key>=<value>
+    }
     overrides, i = [], 0
     while i < len(argv):
         a = argv[i]
@@ -91,8 +103,13 @@ def _split(argv: list[str]) -> tuple[dict[str, Any], list[str]]:
             flags["run_dir"] = a.split("=", 1)[1]
         elif a.startswith("hydra.sweep.dir="):
             flags["sweep_dir"] = a.split("=", 1)[1]
-        elif a.startswith("hydra."):
-            raise CliError(f"{a.split('=', 1)[0]!r} is not supported here (hydra.run.dir, hydra.sweep.dir are)")
+        elif a.lstrip("+").startswith(("hydra/launcher=", "hydra.launcher.")):
+            flags["launcher"].append(a)
+        elif a.startswith(("hydra.", "hydra/")):
+            raise CliError(
+                f"{a.split('=', 1)[0]!r} is not supported here "
+                "(hydra.run.dir, hydra.sweep.dir, hydra/launcher=, hydra.launcher.<key>= are)"
+            )
         elif a.startswith("-"):
             raise CliError(f"unknown option {a!r}; options: --help, --cfg job, -m/--multirun")
         elif "=" not in a:
@@ -110,14 +127,18 @@ def _help(script: Script) -> str:
     if script.keys:
         lines.append("  common keys: " + ", ".join(script.keys))
     lines.append("  flags: --help, --cfg job (print the resolved config), -m/--multirun (sweep a=x,y),")
-    lines.append("         hydra.run.dir=<dir>, hydra.sweep.dir=<dir> (with -m: one subfolder per job)")
+    lines.append("         hydra.run.dir=<dir>, hydra.sweep.dir=<dir> (with -m: one subfolder per job),")
+    lines.append("         hydra/launcher=joblib|submitit_local|submitit_slurm (with -m: jobs in parallel processes")
+    lines.append("         or on a cluster; hydra.launcher.<key>=<value> sets its options: docs/experiments.md)")
     return "\n".join(lines)
 
 
 def run(script: Script, argv: list[str]) -> int:
     """Parse ``argv`` and run ``script``'s job(s); returns the exit code."""
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
-    err_types = (CliError, *script.errors)
+    from cat.launcher import LauncherError
+
+    err_types = (CliError, LauncherError, *script.errors)
     try:
         flags, overrides = _split(argv)
         if flags["help"]:
@@ -136,10 +157,24 @@ def run(script: Script, argv: list[str]) -> int:
                     raise CliError(f"{script.name} writes no output folder: drop hydra.run.dir / hydra.sweep.dir")
                 job = [*job, f"{script.run_dir_key}={out_dir}"]
             configs.append(script.load(job))  # validate every job before running any
+        if flags["launcher"]:
+            from cat.launcher import check_launcher
+
+            check_launcher(flags["launcher"])
         if flags["cfg"]:
             for cfg in configs:
                 print(OmegaConf.to_yaml(OmegaConf.structured(cfg)))
             return 0
+        if flags["multirun"] and flags["launcher"]:
+            from cat.launcher import launch, script_path
+
+            hydra_args = list(flags["launcher"])
+            if flags["sweep_dir"]:
+                hydra_args.append(f"hydra.sweep.dir={flags['sweep_dir']}")
+            full = [[*job, f"{script.run_dir_key}={flags['sweep_dir']}/{k}"] for k, job in enumerate(jobs)]
+            return max(launch(script_path(script.job), full if flags["sweep_dir"] else jobs, hydra_args, script.name))
+        if script.uses_launcher:
+            return max(script.job(cfg, flags["launcher"]) for cfg in configs)
         code = 0
         for k, cfg in enumerate(configs):
             if len(configs) > 1:

@@ -1,0 +1,1 @@
+"""Experiments as code: ``configs/experiment/<name>.yaml`` cells and tables, run by ``scripts/experiment.py``."""

@@ -1,0 +1,263 @@
+"""What an experiment's cells and tables need now: each training run's config hash, status and next command.
+
+A unit is one seed of one cell, trained in ``<experiment>/runs/<cell>/seed<k>/``. Its hash covers the resolved
+training config (``configs/train.yaml`` + the cell's overrides), its legs, and the identity of what it reads (an
+upstream unit's hash and budget, or a checkpoint file's bytes); budgets and per-sitting keys are left out, so a
+larger budget continues a run instead of restarting it. A unit is ``done`` when the state records its hash and
+its final checkpoint exists, ``resume`` when its run stands at an earlier checkpoint with the same hash, ``run``
+otherwise (a stale folder of another hash is moved aside, never deleted).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from omegaconf import OmegaConf
+
+from cat.experiment.spec import BIG_ITERATIONS, Cell, Experiment, ExperimentError, Table
+from cat.learning.hydra_cfg import load_config
+
+# keys that do not change what a run learns (or are the budget, handled apart)
+VOLATILE = ("run_dir", "run_root", "run_name", "max_minutes", "max_iterations", "verbose", "torch_threads")
+VOLATILE += ("init", "resume", "teachers")
+STATE_FILE = "state.json"
+
+
+def latest_checkpoint(run_dir: Path) -> tuple[int, Path] | None:
+    """The highest ``model_<it>.pt`` of a run folder."""
+    found = []
+    for p in run_dir.glob("model_*.pt"):
+        m = re.fullmatch(r"model_(\d+)\.pt", p.name)
+        if m:
+            found.append((int(m.group(1)), p))
+    return max(found) if found else None
+
+
+def file_digest(path: str | Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()[:16]
+
+
+@dataclass
+class Unit:
+    """One seed of one cell."""
+
+    cell: Cell
+    seed: int
+    run_dir: Path
+    base: list[str]  # scripts/train.py overrides of a fresh run (without init / teachers / run_dir)
+    iterations: int  # the first leg's budget (a count)
+    hash: str = ""
+    inputs: dict[str, str] = field(default_factory=dict)  # "init" / "teachers" -> upstream unit key or path
+
+    @property
+    def key(self) -> str:
+        return f"{self.cell.name}@{self.seed}"
+
+    @property
+    def final(self) -> int:
+        """Iterations of the whole run (last leg's)."""
+        return self.cell.legs[-1].iterations if self.cell.legs else self.iterations
+
+    def checkpoint(self) -> Path:
+        """The checkpoint that downstream cells and tables read: the run's last (``model_<final-1>.pt``, or the
+        latest one for a minutes budget)."""
+        if self.cell.minutes is not None and self.cell.iterations is None:
+            latest = latest_checkpoint(self.run_dir)
+            return latest[1] if latest else self.run_dir / "model_<latest>.pt"
+        return self.run_dir / f"model_{self.final - 1}.pt"
+
+
+class Plan:
+    """The units of an experiment, hashed in DAG order, with its folder and state."""
+
+    def __init__(self, exp: Experiment, root: str | None = None):
+        self.exp = exp
+        self.folder = Path(root or exp.root) / exp.name
+        self.units: dict[str, Unit] = {}
+        self.stages = exp.stages()
+        for stage in self.stages:
+            for name in stage:
+                for seed in exp.cells[name].seeds:
+                    unit = self._unit(exp.cells[name], seed)
+                    self.units[unit.key] = unit
+        self.state = self.read_state()
+
+    # -- units -------------------------------------------------------------------------------------------------
+    def _unit(self, cell: Cell, seed: int) -> Unit:
+        base = [f"task={cell.task}", f"method={cell.method}", f"algo={cell.algo}", *self.exp.common]
+        base += [*cell.overrides, f"seed={seed}"]
+        try:
+            cfg = load_config(base)
+        except ExperimentError:
+            raise
+        except Exception as err:  # hydra_cfg.ConfigError & co: name the cell
+            raise ExperimentError(f"cell {cell.name}: {err}") from None
+        iterations = cell.iterations or BIG_ITERATIONS
+        if cell.env_steps is not None:
+            per_iter = (cfg.num_envs or cfg.task.num_envs) * cfg.algo.num_steps_per_env
+            iterations = math.ceil(cell.env_steps / per_iter)
+        unit = Unit(cell, seed, self.folder / "runs" / cell.name / f"seed{seed}", base, iterations)
+        resolved = OmegaConf.to_container(OmegaConf.structured(cfg))
+        for key in VOLATILE:
+            resolved.pop(key, None)
+        ident = {"config": resolved, "legs": [[leg.iterations, leg.overrides] for leg in cell.legs]}
+        if cell.init:
+            unit.inputs["init"] = self._ref(cell.init, seed)
+        for k, teacher in enumerate(cell.teachers):
+            unit.inputs[f"teacher{k}"] = self._ref(teacher, seed)
+        ident["inputs"] = {k: self.identity(v) for k, v in unit.inputs.items()}
+        unit.hash = hashlib.sha256(json.dumps(ident, sort_keys=True, default=str).encode()).hexdigest()[:16]
+        return unit
+
+    def _ref(self, ref: str, seed: int) -> str:
+        """A cell reference -> the upstream unit key (same seed if that cell has it, else its first)."""
+        if ref in self.exp.cells:
+            seeds = self.exp.cells[ref].seeds
+            return f"{ref}@{seed if seed in seeds else seeds[0]}"
+        return ref
+
+    def identity(self, ref: str) -> str:
+        if ref in self.units:
+            u = self.units[ref]
+            return f"{u.hash}:{u.final}:{u.cell.minutes}"
+        return f"{ref}:{file_digest(ref)}" if Path(ref).is_file() else ref
+
+    def path_of(self, ref: str) -> str:
+        """A unit key or a checkpoint path -> the checkpoint file to read."""
+        return str(self.units[ref].checkpoint()) if ref in self.units else ref
+
+    def units_of(self, names: list[str]) -> list[Unit]:
+        return [u for u in self.units.values() if u.cell.name in names]
+
+    # -- state -------------------------------------------------------------------------------------------------
+    def read_state(self) -> dict:
+        path = self.folder / STATE_FILE
+        if not path.is_file():
+            return {"units": {}, "tables": {}}
+        try:
+            state = json.loads(path.read_text())
+        except json.JSONDecodeError as err:
+            raise ExperimentError(f"{path}: not readable JSON ({err})") from None
+        state.setdefault("units", {})
+        state.setdefault("tables", {})
+        return state
+
+    def write_state(self) -> None:
+        self.folder.mkdir(parents=True, exist_ok=True)
+        tmp = self.folder / (STATE_FILE + ".tmp")
+        tmp.write_text(json.dumps(self.state, indent=1, sort_keys=True))
+        tmp.replace(self.folder / STATE_FILE)
+
+    def minutes_used(self, unit: Unit) -> float:
+        return float(self.state["units"].get(unit.key, {}).get("minutes", 0.0))
+
+    def status(self, unit: Unit) -> str:
+        """``done``, ``resume`` (same hash, an earlier checkpoint), ``stale`` (another hash) or ``run``."""
+        latest = latest_checkpoint(unit.run_dir)
+        recorded = self.state["units"].get(unit.key, {}).get("hash")
+        if latest is None:
+            return "run"
+        if recorded != unit.hash:
+            return "stale"
+        it, _ = latest
+        if unit.cell.minutes is not None and unit.cell.iterations is None:
+            done = self.minutes_used(unit) >= unit.cell.minutes
+            return "done" if done or it + 1 >= BIG_ITERATIONS else "resume"
+        return "done" if it + 1 >= unit.final else "resume"
+
+    def leg(self, unit: Unit) -> tuple[int, list[str]]:
+        """The (max_iterations, overrides) of the leg the run stands in."""
+        latest = latest_checkpoint(unit.run_dir)
+        done = latest[0] + 1 if latest else 0
+        legs = [(unit.iterations, [])] + [(leg.iterations, leg.overrides) for leg in unit.cell.legs]
+        return next((leg for leg in legs if leg[0] > done), legs[-1])
+
+    # -- commands ----------------------------------------------------------------------------------------------
+    def fresh_overrides(self, unit: Unit) -> list[str]:
+        out = [*unit.base, f"max_iterations={unit.iterations}"]
+        if "init" in unit.inputs:
+            out.append(f"init={self.path_of(unit.inputs['init'])}")
+        teachers = [self.path_of(v) for k, v in unit.inputs.items() if k.startswith("teacher")]
+        if teachers:
+            out.append(f"teachers=[{','.join(teachers)}]")
+        return [*out, f"run_dir={unit.run_dir}"]
+
+    def resume_overrides(self, unit: Unit, at: Path, iterations: int, leg: list[str]) -> list[str]:
+        return [f"resume={at}", f"max_iterations={iterations}", *leg]
+
+    def chain(self, unit: Unit) -> list[list[str]]:
+        """Every scripts/train.py command of the unit from scratch: the first leg, then each resumed leg."""
+        out = [self.fresh_overrides(unit)]
+        last = unit.iterations
+        for leg in unit.cell.legs:
+            at = unit.run_dir / f"model_{last - 1}.pt"
+            out.append(self.resume_overrides(unit, at, leg.iterations, leg.overrides))
+            last = leg.iterations
+        return out
+
+    # -- tables ------------------------------------------------------------------------------------------------
+    def table_refs(self, table: Table) -> list[str]:
+        """Unit keys (every seed of a referenced cell) and checkpoint paths the table reads."""
+        out = []
+        for ref in table.references():
+            if ref in self.exp.cells:
+                out += [f"{ref}@{s}" for s in self.exp.cells[ref].seeds]
+            else:
+                out.append(ref)
+        return out
+
+    def manifest(self, table: Table) -> dict:
+        """The scripts/eval_table.py manifest of a table, cells replaced by their checkpoints (every seed)."""
+
+        def paths(entries: list) -> list[str]:
+            out = []
+            for e in entries:
+                e = str(e)
+                keys = [f"{e}@{s}" for s in self.exp.cells[e].seeds] if e in self.exp.cells else [e]
+                out += [self.path_of(k) if k in self.units else k for k in keys]
+            return out
+
+        methods = {}
+        for row, entries in table.methods.items():
+            methods[row] = {k: paths(v) for k, v in entries.items()} if isinstance(entries, dict) else paths(entries)
+        out: dict = {"methods": methods}
+        if table.table1 is not None:
+            out["table1"] = dict(table.table1)
+        if table.table2 is not None:
+            out["table2"] = dict(table.table2)
+        return out
+
+    def table_dir(self, table: Table) -> Path:
+        return self.folder / "tables" / table.name
+
+    def table_hash(self, table: Table) -> str:
+        ident = {
+            "manifest": self.manifest(table),
+            "opts": [table.trials_per_scene, table.seed, table.max_envs, table.sim],
+            "inputs": [self.identity(r) for r in self.table_refs(table) if r != "hold"],
+        }
+        return hashlib.sha256(json.dumps(ident, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+    def table_done(self, table: Table) -> bool:
+        recorded = self.state["tables"].get(table.name, {}).get("hash")
+        return recorded == self.table_hash(table) and (self.table_dir(table) / "trials.csv").is_file()
+
+    def table_overrides(self, table: Table) -> list[str]:
+        out = self.table_dir(table)
+        return [
+            f"manifest={out / 'manifest.yaml'}",
+            f"out={out}",
+            f"trials_per_scene={table.trials_per_scene}",
+            f"seed={table.seed}",
+            f"max_envs={table.max_envs}",
+            f"sim={table.sim}",
+        ]

@@ -6,14 +6,14 @@ import importlib
 import sys
 
 COMMANDS = {
-    "sim": "cat.envs.bench",
-    "fields": "cat.fields.bench",
-    "train": "cat.learning.bench",
-    "eval": "cat.eval.bench",
-    "gen": "cat.terrain.bench",
-    "scale": "cat.envs.bench_scale",
-    "soak": "cat.envs.bench_soak",
-    "live": "cat.deploy.bench",
+    "sim": "cat.bench.sim",
+    "fields": "cat.bench.fields",
+    "train": "cat.bench.train",
+    "eval": "cat.bench.eval",
+    "gen": "cat.bench.gen",
+    "scale": "cat.bench.scale",
+    "soak": "cat.bench.soak",
+    "live": "cat.bench.live",
 }
 
 

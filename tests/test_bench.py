@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 import torch
 
-from cat.envs.bench import env_rate
-from cat.envs.bench_scale import query_ms
+from cat.bench.fields import bench_device, median_ms
+from cat.bench.scale import query_ms
+from cat.bench.sim import env_rate
 from cat.envs.config import EnvCfg
 from cat.envs.traversal_env import TraversalEnv
 from cat.fields import FieldBank, FieldCfg, Grid, SceneFields
-from cat.fields.bench import bench_device, median_ms
 
 
 def test_a_cuda_device_without_a_gpu_is_one_clear_error():

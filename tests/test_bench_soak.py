@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import torch
 
-from cat.envs.bench_soak import _Recorder
+from cat.bench.soak import _Recorder
 from cat.envs.config import EnvCfg
 from cat.envs.mdp import rewards as rew_terms
 from cat.envs.traversal_env import TraversalEnv

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 import trimesh
 
+from cat.bench.gen import collision_deviation, distance_to_solid
 from cat.terrain import Scene, make_procedural, make_typical
-from cat.terrain.bench import collision_deviation, distance_to_solid
 from cat.terrain.mujoco_export import add_obstacles_to_spec, uses_voxels
 from cat.terrain.voxel import GridSpec
 from cat.terrain.voxel_collision import VoxelCollisionCfg, cover_boxes, fill_gaps, voxel_parts

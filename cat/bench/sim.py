@@ -18,9 +18,9 @@ import numpy as np
 import torch
 from mujoco import rollout
 
+from cat.bench.fields import bench_device, device_sync
 from cat.envs.config import EnvCfg
 from cat.envs.traversal_env import TraversalEnv
-from cat.fields.bench import bench_device, device_sync
 
 SIZES = {"mujoco": (64, 256, 1024), "warp": (64, 256)}
 

@@ -32,13 +32,13 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from cat.envs.bench import env_rate
+from cat.bench.fields import bench_device, median_ms
+from cat.bench.sim import env_rate
 from cat.envs.config import EnvCfg
 from cat.envs.scene_models import WorldModels
 from cat.envs.scene_set import SceneSet
 from cat.envs.traversal_env import TraversalEnv
 from cat.fields import FieldBank, FieldCfg, Grid, SceneFields, SceneLayout, StaleFieldError, bank_bytes, build_fields
-from cat.fields.bench import bench_device, median_ms
 from cat.fields.store import STORE_FILE
 from cat.terrain import Scene, make_indoor, make_procedural, make_typical
 

@@ -12,7 +12,7 @@ import time
 
 from rsl_rl.runners import OnPolicyRunner
 
-from cat.envs.bench import raw_rate
+from cat.bench.sim import raw_rate
 from cat.learning.config import runner_cfg
 from cat.learning.hydra_cfg import load_config
 from cat.learning.runs import make_env, set_torch_threads

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from cat.envs.curriculum import CurriculumCfg
+from cat.envs.episodes import EpisodeCfg
 
 
 @dataclass
@@ -233,6 +234,9 @@ class EnvCfg:
     episode_length_s: float = 20.0
     scene_dir: str | None = None  # folder of scene folders (scripts/gen_scenes.py); None: see scene_kind
     scene_kind: str | None = None  # keep only scenes of this kind; with no scene_dir, build its typical variants
+    # with scene_dir: the paper's training data group (cat.terrain.data_groups: base | syn_partial_easy |
+    # syn_full_easy | syn_full_hard), a selection of the folder's indoor and procedural scenes; None: all of them
+    data: str | None = None
     # with no scene_dir: typical kinds mixed in one scene set (scene_variants of each); each kind is a scene group,
     # taught by its own specialist in distillation (algo=distill). Overrides scene_kind.
     scene_groups: list[str] = field(default_factory=list)
@@ -272,3 +276,4 @@ class EnvCfg:
     terminations: TerminationCfg = field(default_factory=TerminationCfg)
     success: SuccessCfg = field(default_factory=SuccessCfg)
     curriculum: CurriculumCfg = field(default_factory=CurriculumCfg)  # scene tasks only
+    episodes: EpisodeCfg = field(default_factory=EpisodeCfg)  # scene tasks only: start / goal sampling

@@ -64,6 +64,10 @@ class DifficultyCurriculum:
             out[rows] = pool[torch.randint(len(pool), (len(rows),), generator=gen)]
         return out
 
+    def progress(self, env_ids: torch.Tensor) -> torch.Tensor:
+        """(k,) each env's place in the curriculum, (level + 1) / (max_level + 1) in (0, 1]."""
+        return (self.level[env_ids.cpu()].float() + 1.0) / (self.max_level + 1.0)
+
     def mean_level(self) -> float:
         return float(self.level.float().mean())
 

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
@@ -28,10 +29,12 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from cat.envs.episodes import EpisodeCfg, EpisodeSampler
 from cat.envs.field_source import FieldSample
 from cat.fields import Field, FieldBank, FieldCfg, Grid, SceneFields, SceneLayout, StaleFieldError, build_fields
 from cat.fields.store import STORE_FILE
 from cat.terrain import Scene, typical_variants, warmup_variants
+from cat.terrain.data_groups import select
 from cat.terrain.mujoco_export import add_obstacles_to_spec
 
 log = logging.getLogger(__name__)
@@ -78,6 +81,7 @@ class SceneSet:
         tile_margin: float = 2.0,
         dtype: str = "float32",
         per_world: bool = False,
+        episodes: EpisodeCfg | None = None,
     ):
         """``fields[s]`` (or ``fields(s)``, called once per scene while the bank fills) are scene ``s``'s goal
         fields on its own grid; scenes may have different grid shapes. ``dtype`` is the bank storage.
@@ -86,6 +90,10 @@ class SceneSet:
             raise SceneSetError("no scenes given")
         self.scenes, self.num_envs, self.device = scenes, num_envs, torch.device(device)
         self.per_world = bool(per_world)
+        self.episodes: EpisodeSampler | None = None  # free start/goal sampling (set_episodes); None: start regions
+        self.episode_cfg: EpisodeCfg | None = None
+        if episodes is not None:
+            self.set_episodes(episodes)  # before the bank: a goal range no scene serves fails before anything is built
         extent = max(float(np.max(s.bounds[1, :2] - s.bounds[0, :2])) for s in scenes)
         self.tile_spacing = extent + tile_margin
         cols = math.ceil(math.sqrt(len(scenes)))
@@ -130,9 +138,13 @@ class SceneSet:
         on_stale: str = "rebuild",
         per_world: bool = False,
         mirror: bool = False,
+        data: str | None = None,
+        episodes: EpisodeCfg | None = None,
     ) -> SceneSet:
-        """Every scene folder (with ``scene.json``) under ``path``, optionally only those of ``kind``; grid
-        shapes may differ. Fields are read (or built) one scene at a time while the bank fills; saved fields
+        """Every scene folder (with ``scene.json``) under ``path`` (symbolic links followed, so a folder of links
+        composes scene sets), optionally only those of ``kind`` and of data group ``data``
+        (``cat.terrain.data_groups``); grid shapes may differ. Fields are read (or built) one scene at a time while
+        the bank fills; saved fields
         that do not match ``field_cfg`` (or the scene) are rebuilt (``on_stale="rebuild"``) or refused
         (``"error"``: raises :class:`cat.fields.StaleFieldError`). ``mirror`` adds each scene's mirror image
         (its fields built anew)."""
@@ -141,12 +153,16 @@ class SceneSet:
         root = Path(path)
         if not root.is_dir():
             raise SceneSetError(f"scene folder not found: {root}")
-        folders = sorted(p.parent for p in root.rglob("scene.json"))
+        folders = scene_folders(root)
         scenes = [Scene.load(f) for f in folders]
         keep = [i for i, s in enumerate(scenes) if kind is None or s.kind == kind]
+        if data is not None:
+            sel = select([s.kind for s in scenes], [s.difficulty for s in scenes], [s.seed for s in scenes], data)
+            keep = [i for i in keep if sel[i]]
         if not keep:
             kinds = sorted({s.kind for s in scenes})
-            raise SceneSetError(f"no scenes{' of kind ' + repr(kind) if kind else ''} under {root}; found: {kinds}")
+            what = (" of kind " + repr(kind) if kind else "") + (f" in data group {data!r}" if data else "")
+            raise SceneSetError(f"no scenes{what} under {root}; found: {kinds or 'no scene folder'}")
         scenes, folders = [scenes[i] for i in keep], [folders[i] for i in keep]
         if mirror:
             scenes, folders = with_mirrors(scenes), [x for f in folders for x in (f, None)]
@@ -157,7 +173,7 @@ class SceneSet:
             return scene_fields(scenes[i], folders[i], field_cfg, on_stale)
 
         try:
-            return cls(scenes, load, num_envs, device, dtype=dtype, per_world=per_world)
+            return cls(scenes, load, num_envs, device, dtype=dtype, per_world=per_world, episodes=episodes)
         finally:
             bar.close()
 
@@ -173,6 +189,7 @@ class SceneSet:
         per_world: bool = False,
         warmup: int = 0,
         mirror: bool = False,
+        episodes: EpisodeCfg | None = None,
     ) -> SceneSet:
         """The paper's typical scenes of ``kind`` (or of each of several kinds: one scene group per kind)
         built on the fly (no dataset needed), plus ``warmup`` training-only easier scenes per kind, and with
@@ -180,7 +197,8 @@ class SceneSet:
         kinds = [kind] if isinstance(kind, str) else list(kind)
         scenes = [s for k in kinds for s in warmup_variants(k, warmup, seed) + typical_variants(k, variants, seed)]
         scenes = with_mirrors(scenes) if mirror else scenes
-        return cls(scenes, lambda i: scene_fields(scenes[i], None, field_cfg), num_envs, device, per_world=per_world)
+        load = lambda i: scene_fields(scenes[i], None, field_cfg)  # noqa: E731
+        return cls(scenes, load, num_envs, device, per_world=per_world, episodes=episodes)
 
     # --- env hooks ----------------------------------------------------------------------------------------
     def add_to_spec(self, spec: mujoco.MjSpec) -> None:
@@ -219,18 +237,32 @@ class SceneSet:
     def field_source(self, device) -> BankField:
         return BankField(self.bank, self.num_envs)
 
-    def sample_episode(self, env_ids: torch.Tensor, gen: torch.Generator):
-        """(start (k, 3), goal (k, 3), heading to the goal (k,)) in world coordinates for ``env_ids``."""
+    def set_episodes(self, cfg: EpisodeCfg) -> None:
+        """Sample starts and goals per ``cfg`` (``cat.envs.episodes``); ``mode="scene"`` keeps the start regions.
+        Raises ``EpisodeError`` when the goal range fits no scene of the free kinds."""
+        if cfg == self.episode_cfg:
+            return
+        self.episodes = EpisodeSampler(self.scenes, cfg, self.scenes[0].grid().voxel) if cfg.mode == "free" else None
+        self.episode_cfg = cfg
+
+    def sample_episode(self, env_ids: torch.Tensor, gen: torch.Generator, progress: torch.Tensor | None = None):
+        """(start (k, 3), goal (k, 3), heading to the goal (k,)) in world coordinates for ``env_ids``;
+        ``progress`` (k,) in (0, 1]: each env's curriculum progress (free episodes' goal distance)."""
         ids = env_ids.cpu()
         k = len(ids)
         start, goal = torch.zeros(k, 3), torch.zeros(k, 3)
         for j, i in enumerate(ids.tolist()):
             s_idx = int(self.scene_of_env[i])
             scene, off = self.scenes[s_idx], self.offsets[s_idx]
-            lo, hi = scene.start_region
-            u = torch.rand(2, generator=gen).numpy()
-            start[j, :2] = torch.from_numpy(lo + u * (hi - lo) + off[:2])
-            g = int(torch.randint(len(scene.goals), (1,), generator=gen))
+            if self.episodes is not None and self.episodes.is_free(s_idx):
+                p = 1.0 if progress is None else float(progress[j])
+                xy, g = self.episodes.sample(s_idx, p, gen)
+                start[j, :2] = torch.from_numpy(xy + off[:2])
+            else:
+                lo, hi = scene.start_region
+                u = torch.rand(2, generator=gen).numpy()
+                start[j, :2] = torch.from_numpy(lo + u * (hi - lo) + off[:2])
+                g = int(torch.randint(len(scene.goals), (1,), generator=gen))
             self._goal_idx[i] = g
             goal[j] = torch.from_numpy(scene.goals[g] + off)
         delta = goal[:, :2] - start[:, :2]
@@ -248,6 +280,15 @@ class SceneSet:
     def mesh_for_env(self, env_id: int):
         s_idx = int(self.scene_of_env[env_id])
         return self.scenes[s_idx].mesh.copy().apply_translation(self.offsets[s_idx])
+
+
+def scene_folders(root: Path) -> list[Path]:
+    """Every folder holding a ``scene.json`` under ``root``, following symbolic links, sorted."""
+    found = []
+    for dirpath, _, files in os.walk(root, followlinks=True):
+        if "scene.json" in files:
+            found.append(Path(dirpath))
+    return sorted(found)
 
 
 def with_mirrors(scenes: list[Scene]) -> list[Scene]:

@@ -20,6 +20,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from cat.terrain.data_groups import select
 from cat.terrain.front3d import load_front3d
 from cat.terrain.furniture import House
 from cat.terrain.indoor import make_indoor
@@ -40,6 +41,9 @@ class GenScenesCfg:
     typical_variants: int = 10  # per typical type; difficulties spread over [0, 1]
     typical_kinds: list[str] = field(default_factory=lambda: list(TYPICAL_KINDS))
     procedural: int = 20
+    # a training data group of the paper (cat.terrain.data_groups): only the procedural scenes it selects from the
+    # `procedural` ones spread over [difficulty_min, difficulty_max]; "all" or None: every one
+    data: str | None = None
     difficulty_min: float = 0.0
     difficulty_max: float = 1.0
     indoor: int = 20
@@ -74,8 +78,14 @@ def jobs(cfg: GenScenesCfg) -> list[Job]:
     if not 0.0 <= cfg.difficulty_min <= cfg.difficulty_max <= 1.0:
         lo, hi = cfg.difficulty_min, cfg.difficulty_max
         raise ValueError(f"need 0 <= difficulty_min <= difficulty_max <= 1, got {lo}, {hi}")
-    for i, d in enumerate(_spread(cfg.difficulty_min, cfg.difficulty_max, n, single=cfg.difficulty_min)):
-        todo.append(Job(out / "procedural" / f"proc_{i:03d}", _bind(make_procedural, float(d), cfg.seed * 1000 + i)))
+    diffs = _spread(cfg.difficulty_min, cfg.difficulty_max, n, single=cfg.difficulty_min)
+    seeds = [cfg.seed * 1000 + i for i in range(n)]
+    keep = np.ones(n, dtype=bool)
+    if cfg.data not in (None, "all"):
+        keep = select(["procedural"] * n, diffs, seeds, cfg.data)
+    for i, d in enumerate(diffs):
+        if keep[i]:
+            todo.append(Job(out / "procedural" / f"proc_{i:03d}", _bind(make_procedural, float(d), seeds[i])))
     houses = _front3d_houses(cfg)
     for i in range(cfg.indoor):
         house = houses[i % len(houses)] if houses else None

@@ -27,8 +27,8 @@ def test_resume_gives_the_same_next_update(tmp_path):
     assert not (part / "model_2.pt").exists()
     again = train(resume_config(part / "model_1.pt", ["max_iterations=3"]))
     assert again == part  # the same run folder
-    a = torch.load(full / "model_2.pt", weights_only=False)
-    b = torch.load(part / "model_2.pt", weights_only=False)
+    a = torch.load(full / "model_2.pt", weights_only=True)
+    b = torch.load(part / "model_2.pt", weights_only=True)
     assert a["iter"] == b["iter"] == 2
     for key in ("actor_state_dict", "critic_state_dict"):
         for name, value in a[key].items():
@@ -39,10 +39,10 @@ def test_resume_gives_the_same_next_update(tmp_path):
 def test_a_learning_rate_given_on_resume_replaces_the_optimisers(tmp_path):
     run = train(load_config(_base(tmp_path, "max_iterations=2", "algo.schedule=fixed")))
     kept = train(resume_config(run / "model_1.pt", ["max_iterations=3"]))
-    lr = torch.load(kept / "model_2.pt", weights_only=False)["optimizer_state_dict"]["param_groups"][0]["lr"]
+    lr = torch.load(kept / "model_2.pt", weights_only=True)["optimizer_state_dict"]["param_groups"][0]["lr"]
     assert lr == pytest.approx(3e-4)  # the run's own rate when none is given
     train(resume_config(run / "model_2.pt", ["max_iterations=4", "algo.learning_rate=1e-5"]))
-    lr = torch.load(run / "model_3.pt", weights_only=False)["optimizer_state_dict"]["param_groups"][0]["lr"]
+    lr = torch.load(run / "model_3.pt", weights_only=True)["optimizer_state_dict"]["param_groups"][0]["lr"]
     assert lr == pytest.approx(1e-5)
 
 
@@ -60,9 +60,10 @@ def test_max_minutes_stops_saves_and_resume_counts_on(tmp_path):
     run = train(load_config(_base(tmp_path, "max_iterations=50", "max_minutes=0.0001")))
     saved = sorted(run.glob("model_*.pt"))
     assert [p.name for p in saved] == ["model_0.pt"]  # stopped after the first complete iteration
-    assert (run / "env_0.pt").is_file()
+    snap = torch.load(run / "env_0.pt", weights_only=True)  # tensors and plain data (cat/checkpoint_io.py)
+    assert type(snap["obs"]) is dict and torch.is_tensor(snap["sim"]["qpos"])
     train(resume_config(saved[0], ["max_iterations=2", "max_minutes=0"]))
-    assert torch.load(run / "model_1.pt", weights_only=False)["iter"] == 1
+    assert torch.load(run / "model_1.pt", weights_only=True)["iter"] == 1
     assert (run / "metrics_1.rrd").is_file()  # the resumed part is recorded beside the first
 
 

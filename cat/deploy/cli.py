@@ -12,13 +12,13 @@ from dataclasses import dataclass
 
 import torch
 
+from cat.checkpoint_io import CheckpointError
 from cat.cli import CliError, Script, dataclass_loader, run
 from cat.deploy.perception import PerceptionCfg
 from cat.deploy.policy import policy_spec
 from cat.deploy.runtime import DeployCfg, Runtime
 from cat.deploy.scenes import GoalError, load_scene
 from cat.envs.robot import MenagerieModelError
-from cat.learning.runs import CheckpointError
 from cat.terrain import SceneError
 
 log = logging.getLogger("click_and_traverse")

@@ -20,6 +20,7 @@ import numpy as np
 import torch
 from tensordict import TensorDict
 
+from cat.checkpoint_io import CheckpointError, read_checkpoint, resolve_checkpoint
 from cat.cli import CliError, Script, dataclass_loader
 from cat.deploy.metadata import (
     PolicyFileError,
@@ -34,7 +35,7 @@ from cat.envs.mdp.actions import soft_joint_limits
 from cat.envs.robot import MenagerieModelError, RobotCfg, load_robot_cfg, robot_spec
 from cat.fields import FieldCfg
 from cat.learning.config import policy_model
-from cat.learning.runs import CheckpointError, load_run_config, read_checkpoint, resolve_checkpoint
+from cat.learning.run_config import load_run_config
 
 log = logging.getLogger("export")
 

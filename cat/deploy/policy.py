@@ -17,10 +17,11 @@ import numpy as np
 import torch
 from tensordict import TensorDict
 
+from cat.checkpoint_io import CheckpointError, read_checkpoint, resolve_checkpoint
 from cat.deploy.metadata import PolicyFileError, PolicyMetadata, layout_mismatches, read_metadata
 from cat.envs.config import EnvCfg, FieldObsCfg, ObsGroupCfg
 from cat.learning.config import TrainCfg, policy_model
-from cat.learning.runs import CheckpointError, load_run_config, read_checkpoint, resolve_checkpoint
+from cat.learning.run_config import load_run_config
 
 HOLD = "hold"
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import torch
+from tensordict import TensorDict
 
 from cat.envs.mdp import events
 
@@ -30,7 +31,7 @@ def get_state(env: TraversalEnv) -> dict:
     snap["trial"] = env.trial.state_dict()
     snap["common_step"] = env.common_step
     snap["sim"] = env.sim.get_state()
-    snap["obs"] = env.obs_buf.clone()
+    snap["obs"] = {k: v.clone() for k, v in env.obs_buf.items()}  # plain dict: the safe loader reads it back
     if env.observation_groups.buffers:  # groups with history (absent otherwise: older snapshots stay valid)
         snap["obs_history"] = env.observation_groups.state_dict()
     if env.scenes is not None:
@@ -95,6 +96,7 @@ def set_state(env: TraversalEnv, snap: dict) -> None:
         env.field_source.field_idx.copy_(snap["field_idx"])
     env._update_state()
     env._update_field()
-    env.obs_buf = snap["obs"].clone()
+    obs = snap["obs"]  # a plain dict of groups (a TensorDict in snapshots from before the safe loader)
+    env.obs_buf = TensorDict({k: v.clone() for k, v in obs.items()}, batch_size=[env.num_envs], device=env.device)
     if "obs_history" in snap:
         env.observation_groups.load_state_dict(snap["obs_history"])

@@ -20,6 +20,7 @@ from cat.envs import snapshot
 from cat.envs.config import EnvCfg
 from cat.envs.curriculum import DifficultyCurriculum
 from cat.envs.episode_log import episode_log
+from cat.envs.field_contact import FieldContactCfg, check_obstacles, field_contact_for, field_model
 from cat.envs.field_source import FieldSample
 from cat.envs.math_utils import quat_rotate_inverse, yaw_from_quat, yaw_quat
 from cat.envs.mdp import events
@@ -82,8 +83,13 @@ class TraversalEnv(VecEnv):
         field_cfg: FieldCfg | None = None,
         scenes=None,
         seed: int = 0,
+        obstacles: str = "physical",
+        field_contact: FieldContactCfg | None = None,
     ):
+        """``obstacles`` (``sim.obstacles``): ``physical`` obstacle geometry in the worlds, or ``field``: the floor
+        only, contact judged from the scenes' SDF (``cat.envs.field_contact``, configured by ``field_contact``)."""
         self.cfg = cfg
+        self.obstacles = check_obstacles(obstacles)
         self.robot = robot or load_robot_cfg()
         self.field_cfg = field_cfg or FieldCfg()
         self.num_envs = cfg.num_envs
@@ -97,7 +103,9 @@ class TraversalEnv(VecEnv):
         rew_terms.heading_gate(cfg.rewards.params.heading_gate)
 
         self.world_models = None  # per-world scene models (scenes.per_world), cat.envs.scene_models
-        if scenes is not None and scenes.per_world:
+        if self.obstacles == "field":  # one floor-only model for every world and scene
+            models = [field_model(self.robot)]
+        elif scenes is not None and scenes.per_world:
             from cat.envs.scene_models import WorldModels
 
             check_backend(sim)  # before the scene models are built
@@ -106,7 +114,8 @@ class TraversalEnv(VecEnv):
         else:
             models = [build_env_model(self.robot, scenes.add_to_spec if scenes is not None else None)]
         # pool members (per scene) whose ghost parts stay physical
-        self._physical_members = make_training_ghosts(models, cfg, self.world_models.pool if self.world_models else 0)
+        pool = self.world_models.pool if self.world_models else 0
+        self._physical_members = 0 if self.obstacles == "field" else make_training_ghosts(models, cfg, pool)
         model = models[0]
         self.sim = make_backend(
             sim, model, self.num_envs, self.robot.decimation, device=device, world_models=self.world_models
@@ -122,6 +131,7 @@ class TraversalEnv(VecEnv):
             else fsrc.GoalField(eta=self.field_cfg.eta, free_sdf=cfg.field_obs.sdf_clip)
         )
         self.perception = ScenePerception(cfg.perception, scenes, self.device)
+        self.field_contact = field_contact_for(self, model, field_contact)  # None: physical contact sensors
         self._init_buffers(model)
         self.reset_idx(torch.arange(self.num_envs, device=self.device))
         self._compute_obs()
@@ -210,20 +220,10 @@ class TraversalEnv(VecEnv):
         sens = s.sensordata[ids].to(torch.float32)
         quat = qpos[:, 3:7]
         link_pos, link_vel = sens[:, self._i_link_pos], sens[:, self._i_link_vel]
-        if self._i_collision is None:
-            collision = torch.zeros(len(qpos), dtype=torch.bool, device=self.device)
+        if self.field_contact is not None:
+            collision, hard = self.field_contact.judge(sens, self.field_source.bank, self.field_source.field_idx[ids])
         else:
-            collision = sens[:, self._i_collision] > 0
-        # ghost contacts (all of them, or some parts') are counted but push nothing
-        if self.cfg.ghost_obstacles:
-            hard = torch.zeros_like(collision)
-        elif self._i_hard_collision is not None:
-            hard = (sens[:, self._i_hard_collision] > 0).any(dim=-1)
-            if self._physical_members:  # worlds on a physical pool member: every contact pushes
-                physical = (self.sim.model_ids[ids] % self.world_models.pool < self._physical_members).to(self.device)
-                hard = torch.where(physical, collision, hard)
-        else:
-            hard = collision
+            collision, hard = self._physical_contact(sens, ids)
         return SimState(
             root_pos=qpos[:, :3],
             root_quat=quat,
@@ -242,6 +242,24 @@ class TraversalEnv(VecEnv):
             collision=collision,
             hard_collision=hard,
         )
+
+    def _physical_contact(self, sens: torch.Tensor, ids: torch.Tensor | slice) -> tuple[torch.Tensor, torch.Tensor]:
+        """(collision, hard_collision) from the model's robot-obstacle contact sensors (``sim.obstacles=physical``)."""
+        if self._i_collision is None:
+            collision = torch.zeros(len(sens), dtype=torch.bool, device=self.device)
+        else:
+            collision = sens[:, self._i_collision] > 0
+        # ghost contacts (all of them, or some parts') are counted but push nothing
+        if self.cfg.ghost_obstacles:
+            hard = torch.zeros_like(collision)
+        elif self._i_hard_collision is not None:
+            hard = (sens[:, self._i_hard_collision] > 0).any(dim=-1)
+            if self._physical_members:  # worlds on a physical pool member: every contact pushes
+                physical = (self.sim.model_ids[ids] % self.world_models.pool < self._physical_members).to(self.device)
+                hard = torch.where(physical, collision, hard)
+        else:
+            hard = collision
+        return collision, hard
 
     def _update_state(self, env_ids: torch.Tensor | None = None) -> None:
         """Read the state of all worlds, or refresh only ``env_ids`` (after their reset)."""

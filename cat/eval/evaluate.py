@@ -19,13 +19,14 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from cat.checkpoint_io import CheckpointError, UnsafeCheckpointError
 from cat.envs.config import SuccessCfg
 from cat.eval.manifest import Manifest, ManifestError, MethodRun, load_manifest
 from cat.eval.metrics import TrialResult
 from cat.eval.runner import EvalCfg, HoldPolicy, SceneGroup, make_eval_env, run_trials
 from cat.eval.table import CSV_COLUMNS, render_latex, render_markdown
 from cat.eval.trials import Trial, scene_trials
-from cat.learning.runs import CheckpointError, load_policy
+from cat.learning.runs import load_policy
 from cat.terrain import TYPICAL_KINDS
 
 log = logging.getLogger(__name__)
@@ -64,6 +65,8 @@ def check_policy(run: MethodRun, opts: EvalCfg, sim: str, device: str) -> None:
     env = make_eval_env(run.config.task, None, 1, opts, sim, device)
     try:
         quiet_load_policy(run.checkpoint, env, run)
+    except UnsafeCheckpointError as err:
+        raise ManifestError(f"method {run.method!r}: {err}") from None
     except CheckpointError as err:
         raise ManifestError(
             f"method {run.method!r}: checkpoint {run.checkpoint} does not fit the observation layout of its "
@@ -109,10 +112,10 @@ def evaluate(cfg: EvalTableCfg) -> tuple[list[dict[str, str]], dict[str, str]]:
     opts = EvalCfg(
         starts=cfg.trials_per_scene, seed=cfg.seed, max_envs=cfg.max_envs, success=SuccessCfg(cfg.radius, cfg.time_s)
     )
-    groups = scene_groups(manifest)
     for runs in manifest.methods.values():
         for run in runs:
-            check_policy(run, opts, cfg.sim, cfg.device)
+            check_policy(run, opts, cfg.sim, cfg.device)  # before the scenes: a bad checkpoint fails fast
+    groups = scene_groups(manifest)
     trials = {
         (table, g.name): scene_trials(g.scenes, opts.starts, opts.seed, opts.start_yaw_range)
         for table, gl in groups.items()

@@ -28,9 +28,10 @@ from pathlib import Path
 
 import yaml
 
+from cat.checkpoint_io import CheckpointError
 from cat.envs.obs_groups import groups_layout
 from cat.learning.config import TrainCfg, policy_model
-from cat.learning.runs import CheckpointError, load_run_config
+from cat.learning.run_config import load_run_config
 from cat.terrain import TYPICAL_KINDS
 
 HOLD = "hold"

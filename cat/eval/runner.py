@@ -165,12 +165,24 @@ def eval_task(task: EnvCfg, num_envs: int, cfg: EvalCfg) -> EnvCfg:
 
 
 def make_eval_env(
-    task: EnvCfg, group: SceneGroup | None, num_envs: int, cfg: EvalCfg, sim: str = "mujoco", device: str = "cpu"
+    task: EnvCfg,
+    group: SceneGroup | None,
+    num_envs: int,
+    cfg: EvalCfg,
+    sim: str = "mujoco",
+    device: str = "cpu",
+    trained_obstacles: str = "physical",
 ) -> TraversalEnv:
-    """An env for ``task`` on ``group``'s scenes (``None``: flat ground), auto-reset off."""
+    """An env for ``task`` on ``group``'s scenes (``None``: flat ground), auto-reset off.
+
+    Obstacles are always physical (real geometry, real contacts), whatever the run trained with
+    (``trained_obstacles``, its ``sim.obstacles``): a field-trained policy is scored like every other."""
+    if trained_obstacles != "physical":
+        log.info("the run trained with sim.obstacles=%s: evaluation builds physical obstacles", trained_obstacles)
     per_world = cfg.per_world_scenes and sim == "mujoco"
     scenes = group.scene_set(num_envs, device, per_world) if group is not None else None
-    env = TraversalEnv(eval_task(task, num_envs, cfg), sim=sim, device=device, scenes=scenes, seed=cfg.seed)
+    t = eval_task(task, num_envs, cfg)
+    env = TraversalEnv(t, sim=sim, device=device, scenes=scenes, seed=cfg.seed, obstacles="physical")
     env.auto_reset = False
     return env
 

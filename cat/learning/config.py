@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from cat.envs.config import EnvCfg
+from cat.envs.field_contact import FieldContactCfg
 
 
 @dataclass
@@ -14,6 +15,10 @@ class SimCfg:
     backend: str = "mujoco"  # mujoco | warp
     device: str = "cpu"  # torch device of the env tensors (cuda:0 needs sim=warp)
     per_world_scenes: bool = False  # each world holds only its own scene (docs/scenes.md); else tiles
+    # physical: obstacle geometry in the worlds; field: floor only, contact judged from the scene SDF
+    # (cat/envs/field_contact.py, docs/training.md "Obstacles as fields"). Evaluation is always physical.
+    obstacles: str = "physical"
+    field_contact: FieldContactCfg = field(default_factory=FieldContactCfg)  # margin and spacing of field contact
 
 
 ALGOS = ("ppo", "distill")

@@ -11,17 +11,24 @@ their own files (named in the run's ``config.yaml``), so a student checkpoint st
 
 from __future__ import annotations
 
+import json
 import logging
 import os
 from dataclasses import dataclass, replace
+from pathlib import Path
 
+import numpy as np
 import torch
 import torch.nn as nn
 from rsl_rl.algorithms import Distillation
 from tensordict import TensorDict
 
+from cat.checkpoint_io import CheckpointError, read_checkpoint, resolve_checkpoint
 from cat.envs.obs_groups import groups_layout
+from cat.envs.scene_set import scene_folders
 from cat.learning.config import TrainCfg, policy_model
+from cat.learning.run_config import load_run_config
+from cat.terrain.data_groups import select
 
 log = logging.getLogger(__name__)
 
@@ -30,33 +37,46 @@ class TeacherError(ValueError):
     """A teacher checkpoint that cannot label this env (missing, another layout, no or duplicate group)."""
 
 
-def teacher_group(cfg: TrainCfg, checkpoint: str) -> str:
-    """The scene group a specialist run was trained on (one scene kind), or ``TeacherError``."""
+def teacher_groups(cfg: TrainCfg, checkpoint: str) -> list[str]:
+    """The scene groups a specialist run was trained on (scene kinds), or ``TeacherError``. A run on a scene folder
+    teaches every kind it trained on there (after ``task.scene_kind`` and ``task.data``), e.g. indoor + procedural."""
     task = cfg.task
     if task.scene_groups:
         if len(task.scene_groups) != 1:
             raise TeacherError(
                 f"teacher {checkpoint} trained on several scene groups {task.scene_groups}: not a specialist"
             )
-        return task.scene_groups[0]
+        return [task.scene_groups[0]]
     if task.scene_kind:
-        return task.scene_kind
+        return [task.scene_kind]
     if task.scene_dir:
-        raise TeacherError(f"teacher {checkpoint} trained on all kinds of {task.scene_dir}: set its task.scene_kind")
-    return "flat"
+        return folder_kinds(task.scene_dir, task.data, checkpoint)
+    return ["flat"]
+
+
+def folder_kinds(scene_dir: str, data: str | None, checkpoint: str) -> list[str]:
+    """Scene kinds of a scene folder (in the order ``SceneSet.from_dir`` meets them), as data group ``data``
+    selects them; read from the ``scene.json`` files only."""
+    folders = scene_folders(Path(scene_dir)) if Path(scene_dir).is_dir() else []
+    if not folders:
+        raise TeacherError(f"teacher {checkpoint} trained on {scene_dir}, which holds no scenes here (regenerate it)")
+    meta = [json.loads((f / "scene.json").read_text()) for f in folders]
+    kinds = [m.get("kind", "user") for m in meta]
+    keep = np.ones(len(meta), dtype=bool)
+    if data is not None:
+        keep = select(kinds, [float(m.get("difficulty", 0.0)) for m in meta], [m.get("seed") for m in meta], data)
+    return list(dict.fromkeys(k for k, ok in zip(kinds, keep, strict=True) if ok))
 
 
 @dataclass
 class Specialist:
     checkpoint: str
-    group: str
+    groups: list[str]
     run: TrainCfg
 
 
 def load_specialists(checkpoints: list[str]) -> list[Specialist]:
     """Each checkpoint with its run config and scene group; ``TeacherError`` names a missing or unusable one."""
-    from cat.learning.runs import CheckpointError, load_run_config, resolve_checkpoint
-
     if not checkpoints:
         raise TeacherError("algo=distill needs teachers=[<specialist checkpoint>, ...]")
     out: list[Specialist] = []
@@ -68,17 +88,18 @@ def load_specialists(checkpoints: list[str]) -> list[Specialist]:
             raise TeacherError(f"teacher {ckpt}: {err}") from None
         if run.algo.name != "ppo":
             raise TeacherError(f"teacher {ckpt} is a {run.algo.name} run, not a PPO specialist")
-        group = teacher_group(run, ckpt)
-        if any(s.group == group for s in out):
-            other = next(s.checkpoint for s in out if s.group == group)
-            raise TeacherError(f"teachers {other} and {ckpt} both teach scene group {group!r}")
-        out.append(Specialist(path, group, run))
+        groups = teacher_groups(run, ckpt)
+        for s in out:
+            both = sorted(set(s.groups) & set(groups))
+            if both:
+                raise TeacherError(f"teachers {s.checkpoint} and {ckpt} both teach scene group {both[0]!r}")
+        out.append(Specialist(path, groups, run))
     return out
 
 
 def check_teachers(specialists: list[Specialist], cfg: TrainCfg, group_names: list[str]) -> None:
     """Every scene group of the env has a teacher, and each teacher's actor layout is the env's teacher groups."""
-    own = {s.group for s in specialists}
+    own = {g for s in specialists for g in s.groups}
     for g in group_names:
         if g not in own:
             raise TeacherError(
@@ -113,8 +134,6 @@ class MultiTeacher(nn.Module):
         route_group: str = "route",
         action_clip: float | None = None,
     ) -> None:
-        from cat.learning.runs import read_checkpoint
-
         super().__init__()
         specialists = load_specialists(list(checkpoints or []))
         self.group_names = list(group_names or [])
@@ -122,8 +141,8 @@ class MultiTeacher(nn.Module):
         if route_group not in obs.keys():
             raise TeacherError(f"the env builds no observation group {route_group!r} (the scene_group term)")
         self.teachers = nn.ModuleList()
-        routes = []
-        for s in specialists:
+        route = torch.full((max(len(self.group_names), 1),), -1, dtype=torch.long)  # scene group -> teacher index
+        for k, s in enumerate(specialists):
             model = policy_model(s.run.algo)  # the specialist's actor, reading the env's teacher groups
             actor = replace(model, obs_set=obs_set, obs_groups=list(obs_groups[obs_set])).build(obs, output_dim)
             state = read_checkpoint(s.checkpoint)[model.state_key]
@@ -135,8 +154,10 @@ class MultiTeacher(nn.Module):
             for p in actor.parameters():
                 p.requires_grad_(False)
             self.teachers.append(actor)
-            routes.append(self.group_names.index(s.group) if s.group in self.group_names else -1)
-        self.register_buffer("routes", torch.tensor(routes, dtype=torch.long), persistent=False)
+            for g in s.groups:
+                if g in self.group_names:
+                    route[self.group_names.index(g)] = k
+        self.register_buffer("route", route, persistent=False)
         self.checkpoints = [s.checkpoint for s in specialists]
         if action_clip is not None and action_clip <= 0:
             raise ValueError(f"action_clip must be positive, got {action_clip}")
@@ -144,17 +165,19 @@ class MultiTeacher(nn.Module):
 
     def forward(self, obs: TensorDict, **unused) -> torch.Tensor:
         group = obs[self.route_group][:, 0].round().long()
+        inside = (group >= 0) & (group < len(self.route))
+        teacher = torch.where(inside, self.route[group.clamp(0, len(self.route) - 1)], -1)
         out = None
         for k, actor in enumerate(self.teachers):
-            mask = group == self.routes[k]
+            mask = teacher == k
             if not mask.any():
                 continue
             actions = actor(obs[mask])
             if out is None:
                 out = torch.zeros(group.shape[0], actions.shape[-1], dtype=actions.dtype, device=actions.device)
             out[mask] = actions
-        if out is None or bool((~torch.isin(group, self.routes)).any()):
-            bad = sorted(set(group.tolist()) - set(self.routes.tolist()))
+        if out is None or bool((teacher < 0).any()):
+            bad = sorted(set(group[teacher < 0].tolist()))
             names = [self.group_names[b] if 0 <= b < len(self.group_names) else str(b) for b in bad]
             raise TeacherError(f"envs of scene group(s) {names} have no teacher")
         if self.action_clip is not None:  # the label is what the env executes (it clips every action)

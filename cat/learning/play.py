@@ -87,7 +87,8 @@ def play_trials(
         pairs = sum(len(s.goals) for s in group.scenes)
         trials = first_trials(lambda k: scene_trials(group.scenes, k, cfg.seed, yaw), cfg.episodes, pairs)
     n = cfg.num_envs if cfg.num_envs is not None else min(cfg.episodes, 64)
-    env = make_eval_env(task, group, n, opts, sim=cfg.sim or run_cfg.sim.backend, device=run_cfg.sim.device)
+    sim, device, trained = cfg.sim or run_cfg.sim.backend, run_cfg.sim.device, run_cfg.sim.obstacles
+    env = make_eval_env(task, group, n, opts, sim=sim, device=device, trained_obstacles=trained)  # physical
     policy = load_policy(cfg.checkpoint, env, run_cfg)
     hooks = []
     if cfg.contacts:

@@ -10,12 +10,19 @@ from dataclasses import replace
 from pathlib import Path
 
 import torch
-import yaml
-from omegaconf import OmegaConf
 from rsl_rl.runners import DistillationRunner, OnPolicyRunner
 
 import cat
-from cat.envs.obs_groups import resolve_groups, upgrade_legacy_observations
+from cat.checkpoint_io import (  # noqa: F401  (re-exported: the checkpoint API as callers know it)
+    CheckpointError,
+    UnsafeCheckpointError,
+    env_snapshot_path,
+    plain,
+    read_checkpoint,
+    read_env_snapshot,
+    resolve_checkpoint,
+)
+from cat.envs.obs_groups import resolve_groups
 from cat.envs.sim import check_backend
 from cat.envs.traversal_env import TraversalEnv
 from cat.learning.config import ALGOS, TrainCfg, check_obs_groups, policy_model, runner_cfg, student_model_cfg
@@ -34,29 +41,11 @@ from cat.learning.finetune import (
 )
 from cat.learning.progress import BudgetReached, install_iteration_hook, quiet_constructor
 from cat.learning.rerun_writer import prune_metrics
+from cat.learning.run_config import load_run_config, resume_config, save_config  # noqa: F401  (re-exported)
 from cat.learning.warm_start import adapt_to_new_inputs
 from cat.terrain import TYPICAL_KINDS, kind_name
 
 log = logging.getLogger(__name__)
-
-
-class CheckpointError(FileNotFoundError):
-    """A checkpoint or its run folder is missing or unreadable."""
-
-
-def read_checkpoint(path: str | os.PathLike) -> dict:
-    """A PPO or distillation checkpoint's dict, or ``CheckpointError`` naming the file (missing, corrupt, not
-    rsl_rl's)."""
-    path = Path(path)
-    if not path.is_file():
-        raise CheckpointError(f"checkpoint not found: {path}")
-    try:
-        ckpt = torch.load(path, map_location="cpu", weights_only=False)
-    except Exception as err:  # pickle / zip / EOF errors of a damaged or foreign file
-        raise CheckpointError(f"{path}: not a readable checkpoint ({type(err).__name__}: {err})") from None
-    if not isinstance(ckpt, dict) or not ({"actor_state_dict", "student_state_dict"} & set(ckpt)):
-        raise CheckpointError(f"{path}: not an rsl_rl checkpoint (no actor_state_dict or student_state_dict)")
-    return ckpt
 
 
 def set_torch_threads(threads: int) -> None:
@@ -209,6 +198,8 @@ def validate_train_cfg(cfg: TrainCfg) -> None:
     path = cfg.resume or cfg.init
     if path:
         ckpt = read_checkpoint(path)
+        if cfg.resume and env_snapshot_path(path).is_file():
+            read_env_snapshot(env_snapshot_path(path), map_location="cpu")  # an unsafe one: refused before any env
         if cfg.resume and "optimizer_state_dict" not in ckpt:
             raise CheckpointError(
                 f"resume={path}: it holds no optimiser state (shipped with weights_only=true), so the run cannot "
@@ -225,64 +216,6 @@ def validate_train_cfg(cfg: TrainCfg) -> None:
             check_actor_matches_student(cfg, load_run_config(path), str(path))
 
 
-def save_config(cfg: TrainCfg, run_dir: Path) -> None:
-    (run_dir / "config.yaml").write_text(OmegaConf.to_yaml(OmegaConf.structured(cfg)))
-
-
-def resolve_checkpoint(path: str | os.PathLike) -> Path:
-    """A checkpoint file, or a run folder's latest ``model_<it>.pt`` (highest iteration)."""
-    path = Path(path)
-    if path.is_dir():
-        models = sorted(
-            path.glob("model_*.pt"), key=lambda p: int(p.stem.split("_")[1]) if p.stem[6:].isdigit() else -1
-        )
-        if not models:
-            raise CheckpointError(f"run folder {path} holds no model_<iteration>.pt")
-        return models[-1]
-    return path
-
-
-def load_run_config(checkpoint: str | os.PathLike) -> TrainCfg:
-    """The resolved config saved beside a checkpoint."""
-    ckpt = resolve_checkpoint(checkpoint)
-    if not ckpt.is_file():
-        raise CheckpointError(f"checkpoint not found: {ckpt}")
-    cfg_file = ckpt.parent / "config.yaml"
-    if not cfg_file.is_file():
-        raise CheckpointError(f"no config.yaml beside checkpoint {ckpt} (expected {cfg_file})")
-    raw = yaml.safe_load(cfg_file.read_text()) or {}
-    task = raw.get("task") or {}
-    if "scene_seed" not in task and task.get("scene_kind"):
-        # runs from before task.scene_seed built their typical scenes from the RL seed: keep their scenes
-        raw.setdefault("task", {})["scene_seed"] = raw.get("seed", 0)
-    if raw.get("task"):
-        raw["task"] = upgrade_legacy_observations(raw["task"])  # runs from before named observation groups
-    schema = OmegaConf.structured(TrainCfg)
-    return OmegaConf.to_object(OmegaConf.merge(schema, raw))
-
-
-def resume_config(checkpoint: str | os.PathLike, overrides: list[str]) -> TrainCfg:
-    """The config of the run being resumed, with only the keys given on the command line changed.
-
-    Config-group choices (``task=``, ``sim=``, ``algo=``, ``method=``) cannot change on resume: the run keeps its
-    own.
-    """
-    base = OmegaConf.structured(load_run_config(checkpoint))
-    dotlist = []
-    for item in overrides:
-        key, value = item.split("=", 1)
-        if key in ("task", "sim", "algo", "field", "method"):
-            if key == "task" and value != base.task.task:
-                raise ValueError(f"resume={checkpoint} continues task {base.task.task!r}; drop task={value}")
-            if key == "method" and value != base.method:
-                raise ValueError(f"resume={checkpoint} continues method {base.method!r}; drop method={value}")
-            continue
-        dotlist.append(item)
-    merged = OmegaConf.merge(base, OmegaConf.from_dotlist(dotlist))
-    merged.resume = str(checkpoint)
-    return OmegaConf.to_object(merged)
-
-
 def make_runner(cfg: TrainCfg, env: TraversalEnv, log_dir: str | None) -> OnPolicyRunner:
     """rsl_rl's PPO runner, or for ``algo=distill`` its ``DistillationRunner`` with the multi-teacher loaded."""
     if cfg.algo.name == "distill":
@@ -290,6 +223,15 @@ def make_runner(cfg: TrainCfg, env: TraversalEnv, log_dir: str | None) -> OnPoli
         runner.alg.teacher_loaded = True  # MultiTeacher loaded and checked every specialist on construction
         return runner
     return OnPolicyRunner(env, runner_cfg(cfg.algo, env.obs_groups), log_dir=log_dir, device=str(env.device))
+
+
+def load_into_runner(runner: OnPolicyRunner, path: str, load_cfg: dict | None = None) -> dict | None:
+    """rsl_rl's ``runner.load`` (weights, optimiser, iteration per ``load_cfg``; strict) with the file read by the
+    safe loader: rsl_rl's own ``load`` unpickles with ``weights_only=False``. Returns the checkpoint's ``infos``."""
+    ckpt = read_checkpoint(path, map_location=None)  # tensors where they were saved, as rsl_rl's load
+    if runner.alg.load(ckpt, load_cfg, True):
+        runner.current_learning_iteration = ckpt["iter"]
+    return ckpt.get("infos")
 
 
 def _training_state(env: TraversalEnv, cfg: TrainCfg) -> dict:
@@ -303,18 +245,12 @@ def _training_state(env: TraversalEnv, cfg: TrainCfg) -> dict:
     }
 
 
-def env_snapshot_path(checkpoint: str | os.PathLike) -> Path:
-    """``model_<it>.pt`` -> ``env_<it>.pt``: the env snapshot saved with it (not needed to play)."""
-    ckpt = Path(checkpoint)
-    return ckpt.with_name(ckpt.name.replace("model_", "env_", 1))
-
-
 def _save_with_state(runner: OnPolicyRunner, env: TraversalEnv, cfg: TrainCfg, save) -> None:
     """Checkpoints also carry RNG + curriculum (in ``infos``) and an env snapshot file beside them."""
 
     def save_all(path: str, infos: dict | None = None) -> None:
-        save(path, infos=_training_state(env, cfg))
-        torch.save(env.get_state(), env_snapshot_path(path))
+        save(path, infos=plain(_training_state(env, cfg)))  # tensors and plain data: the safe loader reads it
+        torch.save(plain(env.get_state()), env_snapshot_path(path))
 
     runner.save = save_all
 
@@ -344,7 +280,7 @@ def _restore_training_state(
     snap = env_snapshot_path(checkpoint)
     if snap.is_file():
         try:
-            env.set_state(torch.load(snap, weights_only=False))
+            env.set_state(read_env_snapshot(snap))  # an unsafe snapshot raises: never a silent fresh start
         except (ValueError, KeyError) as err:
             log.warning("env snapshot %s not usable (%s): the resumed run starts fresh episodes", snap, err)
     else:
@@ -385,7 +321,7 @@ def _train_in(cfg: TrainCfg, env: TraversalEnv, run_dir: Path) -> Path:
         runner = make_runner(cfg, env, str(run_dir))
     runner.logger.git_status_repos = [cat.__file__]  # record this project's commit and diff in <run>/git/
     if cfg.resume:
-        _restore_training_state(runner, env, cfg, runner.load(cfg.resume), run_lr)
+        _restore_training_state(runner, env, cfg, load_into_runner(runner, cfg.resume), run_lr)
         save_config(cfg, run_dir)
         runner.current_learning_iteration += 1  # the checkpoint's iteration is complete
         dropped = prune_metrics(run_dir / "metrics.csv", runner.current_learning_iteration)
@@ -398,7 +334,7 @@ def _train_in(cfg: TrainCfg, env: TraversalEnv, run_dir: Path) -> Path:
         # the student knows its inputs: nothing to adapt (finetune.py)
         load_student_as_actor(runner, ckpt, cfg.init, cfg.algo.init_noise_std)
     elif cfg.init:
-        runner.load(cfg.init, load_cfg={"actor": True, "critic": True}, strict=True)
+        load_into_runner(runner, cfg.init, load_cfg={"actor": True, "critic": True})
         runner.current_learning_iteration = 0
         adapt_to_new_inputs(runner.alg, env)  # inputs the prior never saw vary (warm_start.py)
         log.info("initialised weights from %s", cfg.init)

@@ -19,8 +19,8 @@ from pathlib import Path
 
 import torch
 
+from cat.checkpoint_io import CheckpointError, env_snapshot_path, read_checkpoint, read_env_snapshot, resolve_checkpoint
 from cat.cli import Script, dataclass_loader
-from cat.learning.runs import CheckpointError, env_snapshot_path, read_checkpoint, resolve_checkpoint
 
 
 @dataclass
@@ -74,6 +74,8 @@ def ship(cfg: ShipCfg) -> list[Path]:
                 + ("" if cfg.weights_only else " (weights_only=true drops the optimiser state)")
             )
         companions = [config, run_dir / "metrics.csv"] + ([] if cfg.weights_only else [env_snapshot_path(src)])
+        if not cfg.weights_only and env_snapshot_path(src).is_file():
+            read_env_snapshot(env_snapshot_path(src), map_location="cpu")  # ship only what the safe loader reads
         for path in companions:
             if path.is_file():
                 shutil.copy2(path, stage / path.name)

@@ -1,0 +1,273 @@
+"""Robot–obstacle contact judged from the scene SDF (``sim.obstacles=field``), as the authors' release trains.
+
+In ``field`` mode the physics worlds hold the robot and the floor only: one compiled model for every world and
+any number of scenes. Obstacles exist as the scene's signed distance d in the field bank (``cat.fields.bank``,
+d > 0 free, d < 0 inside). The robot is in contact when any of a dense set of points on the surfaces of its
+collision geoms (capsules, boxes, spheres of ``robots/g1/g1.yaml``'s ``collision_geoms``, sampled every
+``FieldContactCfg.spacing`` metres) has d < ``FieldContactCfg.margin``. The points are fixed in their body's
+frame; each step the body poses come from MuJoCo frame sensors (``add_body_pose_sensors``), so both backends
+compute them inside the simulator.
+
+Points outside their scene's field grid count as free (no obstacle is known there). To keep the query cheap,
+each body is first tested at the centre of a sphere bounding its points: bodies whose centre lies farther than
+the sphere's radius + margin + ``CULL_SLACK`` from every obstacle are not queried point by point.
+
+The judgement is an instant (the sensor time of the control step); physical contact is a max over the physics
+substeps. The margin and spacing, and the agreement measured against physical contact, are in docs/training.md
+("Obstacles as fields").
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import mujoco
+import numpy as np
+import torch
+
+from cat.envs.robot import RobotCfg
+from cat.envs.scene import build_env_model
+
+if TYPE_CHECKING:
+    from cat.envs.traversal_env import TraversalEnv
+
+log = logging.getLogger(__name__)
+
+OBSTACLE_MODES = ("physical", "field")
+"""``sim.obstacles``: obstacle geometry in the physics worlds (``physical``) or only as SDF (``field``)."""
+POSE_SENSOR_PREFIX = "field_contact_pose_"
+CULL_SLACK = 0.06
+"""m: extra distance before a body's bounding sphere is considered clear (the interpolated SDF of a 4 cm voxel
+grid is not exactly 1-Lipschitz; tests check culling never changes the judgement)."""
+
+
+@dataclass
+class FieldContactCfg:
+    """How ``sim.obstacles=field`` judges contact (see the module docstring and docs/training.md)."""
+
+    spacing: float = 0.03
+    """m: largest gap between neighbouring sample points on a collision geom's surface."""
+    margin: float = 0.005
+    """m: a point with SDF below this is in contact. +5 mm: best agreement with physical contact measured over
+    random-action rollouts (docs/training.md); the fields' 4 cm voxels place surfaces within ±2 cm."""
+
+
+def check_obstacles(mode: str) -> str:
+    """``mode`` if it is a known ``sim.obstacles`` value, else a one-line ``ValueError``."""
+    if mode not in OBSTACLE_MODES:
+        raise ValueError(f"sim.obstacles={mode!r}; valid: {', '.join(OBSTACLE_MODES)}")
+    return mode
+
+
+def collision_bodies(spec: mujoco.MjSpec, robot: RobotCfg) -> list[str]:
+    """Robot bodies carrying at least one of ``robot.collision_geoms``, in spec order."""
+    wanted = set(robot.collision_geoms)
+    return [b.name for b in spec.bodies if any(g.name in wanted for g in b.geoms)]
+
+
+def add_body_pose_sensors(spec: mujoco.MjSpec, robot: RobotCfg) -> None:
+    """World position and orientation sensors of every robot body with a collision geom (field contact)."""
+    xbody = mujoco.mjtObj.mjOBJ_XBODY
+    for body in collision_bodies(spec, robot):
+        for kind, typ in (("pos", mujoco.mjtSensor.mjSENS_FRAMEPOS), ("quat", mujoco.mjtSensor.mjSENS_FRAMEQUAT)):
+            spec.add_sensor(name=f"{POSE_SENSOR_PREFIX}{kind}_{body}", type=typ, objtype=xbody, objname=body)
+
+
+# --- surface sampling (geom frame) ----------------------------------------------------------------------------
+def _ring(radius: float, z: float, spacing: float) -> np.ndarray:
+    n = max(3, math.ceil(2 * math.pi * radius / spacing))
+    a = 2 * math.pi * np.arange(n) / n
+    return np.c_[radius * np.cos(a), radius * np.sin(a), np.full(n, z)]
+
+
+def _sphere(radius: float, spacing: float, hemisphere: int = 0) -> np.ndarray:
+    """Fibonacci points on a sphere (``hemisphere`` +1 / -1: the z >= 0 / z <= 0 half only)."""
+    area = (2.0 if hemisphere else 4.0) * math.pi * radius**2
+    n = max(6, math.ceil(1.3 * area / spacing**2))
+    i = np.arange(n) + 0.5
+    z = 1.0 - i / n if hemisphere else 1.0 - 2.0 * i / n
+    r = np.sqrt(np.clip(1.0 - z * z, 0.0, None))
+    phi = math.pi * (3.0 - math.sqrt(5.0)) * i
+    p = np.c_[r * np.cos(phi), r * np.sin(phi), z] * radius
+    if hemisphere < 0:
+        p[:, 2] *= -1
+    return p
+
+
+def _grid(half: float, spacing: float) -> np.ndarray:
+    return np.linspace(-half, half, max(2, math.ceil(2 * half / spacing) + 1))
+
+
+def geom_surface_points(gtype: int, size: np.ndarray, spacing: float) -> np.ndarray:
+    """(P, 3) points covering a sphere, capsule (axis z), cylinder or box surface, neighbours <= ``spacing``."""
+    g = mujoco.mjtGeom
+    if gtype == g.mjGEOM_SPHERE:
+        return _sphere(float(size[0]), spacing)
+    if gtype in (g.mjGEOM_CAPSULE, g.mjGEOM_CYLINDER):
+        r, h = float(size[0]), float(size[1])
+        parts = [_ring(r, z, spacing) for z in _grid(h, spacing)]
+        if gtype == g.mjGEOM_CAPSULE:
+            parts += [_sphere(r, spacing, +1) + [0, 0, h], _sphere(r, spacing, -1) - [0, 0, h]]
+        else:
+            for z in (-h, h):
+                parts += [_ring(rr, z, spacing) for rr in np.linspace(0, r, max(2, math.ceil(r / spacing) + 1))[1:]]
+                parts.append(np.array([[0.0, 0.0, z]]))
+        return np.concatenate(parts)
+    if gtype == g.mjGEOM_BOX:
+        axes = [_grid(float(s), spacing) for s in size[:3]]
+        out = []
+        for k in range(3):  # the two faces normal to axis k
+            u, v = [axes[j] for j in range(3) if j != k]
+            uu, vv = np.meshgrid(u, v, indexing="ij")
+            for side in (-1.0, 1.0):
+                face = np.zeros((uu.size, 3))
+                face[:, [j for j in range(3) if j != k]] = np.c_[uu.ravel(), vv.ravel()]
+                face[:, k] = side * size[k]
+                out.append(face)
+        return np.unique(np.round(np.concatenate(out), 9), axis=0)
+    raise ValueError(f"field contact: geom type {gtype} is not a sphere, capsule, cylinder or box")
+
+
+def _quat_rotate(q: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
+    """Rotate ``v`` (..., 3) by unit quaternions ``q`` (..., 4) (w, x, y, z)."""
+    w, xyz = q[..., :1], q[..., 1:]
+    t = 2.0 * torch.cross(xyz, v, dim=-1)
+    return v + w * t + torch.cross(xyz, t, dim=-1)
+
+
+def _quat_np(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    return _quat_rotate(torch.tensor(q, dtype=torch.float64), torch.tensor(v, dtype=torch.float64)).numpy()
+
+
+# --- the judgement ---------------------------------------------------------------------------------------------
+class FieldContact:
+    """Contact of each robot body with the obstacles of each env's scene, judged from the field bank's SDF.
+
+    ``bodies`` are the robot bodies with collision geoms; ``points[b]`` their surface samples in the body frame
+    (padded to one length by repeating a point). ``ghost_parts`` bodies are judged but do not count as hard
+    contacts; with ``ghost_obstacles`` no contact is hard (the physical mode's training aids, same meaning).
+    """
+
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        robot: RobotCfg,
+        cfg: FieldContactCfg,
+        device: str | torch.device = "cpu",
+        ghost_parts: Sequence[str] = (),
+        ghost_obstacles: bool = False,
+    ):
+        if cfg.spacing <= 0:
+            raise ValueError(f"sim.field_contact.spacing={cfg.spacing}: must be > 0")
+        self.cfg, self.device = cfg, torch.device(device)
+        geoms = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, g) for g in robot.collision_geoms]
+        body_ids = list(dict.fromkeys(int(model.geom_bodyid[g]) for g in geoms))
+        self.bodies = [model.body(b).name for b in body_ids]
+        per_body: list[list[np.ndarray]] = [[] for _ in body_ids]
+        for g in geoms:
+            local = geom_surface_points(int(model.geom_type[g]), model.geom_size[g], cfg.spacing)
+            in_body = model.geom_pos[g] + _quat_np(np.broadcast_to(model.geom_quat[g], (len(local), 4)), local)
+            per_body[body_ids.index(int(model.geom_bodyid[g]))].append(in_body)
+        pts = [np.concatenate(p) for p in per_body]
+        self.num_points = sum(len(p) for p in pts)
+        k = max(len(p) for p in pts)
+        padded = np.stack([np.concatenate([p, np.repeat(p[:1], k - len(p), axis=0)]) for p in pts])
+        lo, hi = np.stack([p.min(0) for p in pts]), np.stack([p.max(0) for p in pts])
+        centre = 0.5 * (lo + hi)
+        f32 = dict(dtype=torch.float32, device=self.device)
+        self.points = torch.tensor(padded, **f32)  # (B, K, 3) body frame
+        self.centre = torch.tensor(centre, **f32)  # (B, 3) bounding-sphere centres, body frame
+        radius = [np.linalg.norm(p - c, axis=1).max() for p, c in zip(pts, centre, strict=True)]
+        self.radius = torch.tensor(radius, **f32)
+        unknown = sorted(set(ghost_parts) - set(self.bodies))
+        if unknown:
+            raise ValueError(f"ghost_parts {unknown} have no collision geom; robot bodies that do: {self.bodies}")
+        self.hard_bodies = torch.tensor([b not in ghost_parts for b in self.bodies], device=self.device)
+        self.ghost_obstacles = ghost_obstacles
+        self.cull = True
+        self._cols: torch.Tensor | None = None
+
+    def sensor_columns(self, sensors: dict) -> None:
+        """Find the pose sensors of the bodies in a backend's ``sensors`` (name -> ``SensorSlice``)."""
+        cols = []
+        for b in self.bodies:
+            p, q = sensors[f"{POSE_SENSOR_PREFIX}pos_{b}"], sensors[f"{POSE_SENSOR_PREFIX}quat_{b}"]
+            cols.append(list(range(p.adr, p.adr + 3)) + list(range(q.adr, q.adr + 4)))
+        self._cols = torch.tensor(cols, device=self.device)
+
+    def poses(self, sensordata: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(pos (n, B, 3), quat (n, B, 4)) of the bodies from sensor rows (n, nsensordata)."""
+        if self._cols is None:
+            raise RuntimeError("FieldContact.sensor_columns was never called")
+        x = sensordata[:, self._cols.to(sensordata.device)].to(self.device, torch.float32)
+        q = x[..., 3:]
+        return x[..., :3], q / q.norm(dim=-1, keepdim=True).clamp_min(1e-9)
+
+    def body_sdf(self, bank, field_idx: torch.Tensor, pos: torch.Tensor, quat: torch.Tensor) -> torch.Tensor:
+        """(n, B) smallest SDF over each body's points (+inf: clear, or culled as clearly free)."""
+        n, nb = pos.shape[:2]
+        out = torch.full((n, nb), math.inf, device=self.device)
+        if n == 0:
+            return out
+        idx = field_idx.to(self.device).long()
+        if self.cull:
+            centre = pos + _quat_rotate(quat, self.centre.expand(n, nb, 3))
+            s = bank.query(idx, centre)
+            d = torch.where(s.inside, s.sdf.to(self.device), self._outside_gap(bank, idx, centre))
+            pairs = (d < self.radius + self.cfg.margin + CULL_SLACK).nonzero()
+        else:
+            pairs = torch.cartesian_prod(torch.arange(n, device=self.device), torch.arange(nb, device=self.device))
+        if len(pairs) == 0:
+            return out
+        e, b = pairs[:, 0], pairs[:, 1]
+        k = self.points.shape[1]
+        world = pos[e, b][:, None] + _quat_rotate(quat[e, b][:, None].expand(-1, k, 4), self.points[b])
+        s = bank.query(idx[e], world)
+        sdf = torch.where(s.inside, s.sdf, torch.full_like(s.sdf, math.inf)).to(self.device)
+        out[e, b] = sdf.amin(dim=1)
+        return out
+
+    @staticmethod
+    def _outside_gap(bank, idx: torch.Tensor, p: torch.Tensor) -> torch.Tensor:
+        """Distance (n, B) of points outside their field's grid box to the box."""
+        lo, hi = bank.field_bounds(idx)
+        lo, hi = lo.to(p)[:, None], hi.to(p)[:, None]
+        return torch.maximum(lo - p, p - hi).clamp_min(0.0).norm(dim=-1)
+
+    def judge(self, sensordata: torch.Tensor, bank, field_idx: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(collision (n,), hard_collision (n,)) of the worlds whose sensor rows are ``sensordata`` (n, ...)."""
+        pos, quat = self.poses(sensordata)
+        touching = self.body_sdf(bank, field_idx, pos, quat) < self.cfg.margin
+        hard = torch.zeros_like(touching[:, 0]) if self.ghost_obstacles else (touching & self.hard_bodies).any(-1)
+        return touching.any(dim=-1), hard
+
+
+def field_model(robot: RobotCfg) -> mujoco.MjModel:
+    """The one model of ``sim.obstacles=field``: robot + floor + the env sensors + the body pose sensors."""
+    return build_env_model(robot, lambda spec: add_body_pose_sensors(spec, robot))
+
+
+def field_contact_for(env: TraversalEnv, model: mujoco.MjModel, cfg: FieldContactCfg | None) -> FieldContact | None:
+    """The judgement of a ``field`` env on a scene set (``None``: physical obstacles, or no scenes at all)."""
+    if env.obstacles != "field" or env.scenes is None:
+        return None
+    if env.cfg.ghost_parts_physical:
+        raise ValueError("task.ghost_parts_physical draws per-world physical models: not with sim.obstacles=field")
+    fc = FieldContact(
+        model, env.robot, cfg or FieldContactCfg(), env.device, env.cfg.ghost_parts, env.cfg.ghost_obstacles
+    )
+    fc.sensor_columns(env.sim.sensors)
+    log.info(
+        "sim.obstacles=field: one floor-only model for %d scene(s); contact where the SDF < %.3f m at %d points "
+        "on %d bodies (spacing %.3f m)",
+        len(env.scenes.scenes),
+        fc.cfg.margin,
+        fc.num_points,
+        len(fc.bodies),
+        fc.cfg.spacing,
+    )
+    return fc

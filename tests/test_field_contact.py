@@ -1,0 +1,204 @@
+"""``sim.obstacles=field``: contact judged from the scene SDF (cat/envs/field_contact.py), real MuJoCo throughout.
+
+A constructed pose 2 cm inside a wall is in contact and 1 cm clear is not (in both modes); the judgement's
+agreement with physical contact over random-action rollouts of every typical type; one model for any number of
+scenes; evaluation of a field-trained run is physical.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import mujoco
+import numpy as np
+import pytest
+import torch
+
+from cat.envs.config import EnvCfg
+from cat.envs.field_contact import FieldContact, FieldContactCfg, geom_surface_points
+from cat.envs.robot import home_qpos
+from cat.envs.scene_set import SceneSet, scene_fields
+from cat.envs.traversal_env import TraversalEnv
+from cat.terrain import TYPICAL_KINDS, Scene
+from cat.terrain.mujoco_export import obstacle_geom_ids
+from cat.terrain.primitives import box
+
+log = logging.getLogger(__name__)
+FACE_X = 0.2  # wall face on a voxel face of the scene grid (origin x -1.0, 4 cm voxels): the SDF is exact there
+G = mujoco.mjtGeom
+
+
+def wall_scene(face_x: float = FACE_X) -> Scene:
+    """A wall filling x >= ``face_x`` (0.4 m thick, 2 m wide, 1.6 m tall), goal behind the robot."""
+    return Scene(
+        mesh=box((face_x, -1.0, 0.0), (face_x + 0.4, 1.0, 1.6)),
+        bounds=np.array([[-1.0, -1.2, 0.0], [1.8, 1.2, 1.8]]),
+        start=np.array([-0.5, 0.0, 0.75]),
+        goals=np.array([[-0.8, 0.0, 0.75]]),
+        kind="wall",
+    )
+
+
+def wall_env(obstacles: str, faces=(FACE_X,), sim: str = "mujoco", per_world: bool = True) -> TraversalEnv:
+    scenes = [wall_scene(f) for f in faces]
+    n = len(scenes)
+    sset = SceneSet(scenes, [scene_fields(s, None, None) for s in scenes], n, per_world=per_world)
+    return TraversalEnv(EnvCfg(num_envs=n), sim=sim, scenes=sset, obstacles=obstacles)
+
+
+def body_points(fc: FieldContact, sens: torch.Tensor) -> torch.Tensor:
+    """(n, B, K, 3) world positions of every sample point."""
+    from cat.envs.field_contact import _quat_rotate
+
+    pos, quat = fc.poses(sens)
+    k = fc.points.shape[1]
+    return pos[:, :, None] + _quat_rotate(quat[:, :, None].expand(-1, -1, k, 4), fc.points.expand(len(pos), -1, -1, -1))
+
+
+def pose_at(env: TraversalEnv, x: float) -> None:
+    """Every world: the home pose, root at (x, 0), facing +x; sensors (and contacts) recomputed."""
+    n = env.num_envs
+    qpos = torch.tensor(home_qpos(env.robot), dtype=torch.float64).repeat(n, 1)
+    qpos[:, 0] = x
+    env.sim.reset(torch.arange(n), qpos, torch.zeros(n, env.sim.model.nv, dtype=torch.float64))
+    env._update_state()
+
+
+def front_offset(env: TraversalEnv) -> float:
+    """x of the robot's frontmost collision-surface sample relative to its root, in the home pose."""
+    pose_at(env, 0.0)
+    return float(body_points(env.field_contact, env.sim.sensordata.float())[0].reshape(-1, 3)[:, 0].max())
+
+
+@pytest.mark.parametrize("gtype,size", [(G.mjGEOM_SPHERE, (0.07, 0, 0)), (G.mjGEOM_CAPSULE, (0.045, 0.075, 0)),
+                                        (G.mjGEOM_BOX, (0.09, 0.03, 0.008))])  # fmt: skip
+def test_surface_points_lie_on_and_cover_the_geom(gtype, size):
+    spacing = 0.03
+    pts = geom_surface_points(gtype, np.array(size), spacing)
+    r = size[0]
+    if gtype == G.mjGEOM_SPHERE:
+        dist = np.abs(np.linalg.norm(pts, axis=1) - r)
+        probe = np.random.default_rng(0).normal(size=(500, 3))
+        probe = r * probe / np.linalg.norm(probe, axis=1, keepdims=True)
+    elif gtype == G.mjGEOM_CAPSULE:
+        h = size[1]
+        axis = np.c_[np.zeros(len(pts)), np.zeros(len(pts)), np.clip(pts[:, 2], -h, h)]
+        dist = np.abs(np.linalg.norm(pts - axis, axis=1) - r)
+        rng = np.random.default_rng(0)
+        d = rng.normal(size=(300, 3))
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        caps = np.c_[np.zeros(300), np.zeros(300), np.sign(d[:, 2]) * h] + r * d  # the hemispherical caps
+        a, z = rng.uniform(0, 2 * np.pi, 300), rng.uniform(-h, h, 300)
+        probe = np.r_[caps, np.c_[r * np.cos(a), r * np.sin(a), z]]  # and the cylinder between them
+    else:
+        half = np.array(size)
+        dist = np.min(np.abs(np.abs(pts) - half), axis=1)  # on some face
+        assert np.all(np.abs(pts) <= half + 1e-9)
+        rng = np.random.default_rng(0)
+        probe = rng.uniform(-half, half, (600, 3))
+        k = rng.integers(0, 3, 600)
+        probe[np.arange(600), k] = np.sign(rng.uniform(-1, 1, 600)) * half[k]
+    assert dist.max() < 1e-6
+    gap = np.linalg.norm(probe[:, None] - pts[None], axis=-1).min(axis=1)
+    assert gap.max() <= spacing  # every surface point is within one spacing of a sample
+
+
+def test_pose_two_cm_inside_a_wall_is_contact_and_one_cm_clear_is_not():
+    field, physical = wall_env("field"), wall_env("physical")
+    margin = field.field_contact.cfg.margin
+    assert -0.02 < margin < 0.01  # the documented margin separates the two poses
+    dx = front_offset(field)
+    for depth, expect in ((0.02, True), (-0.01, False)):
+        x = FACE_X + depth - dx
+        for env in (field, physical):
+            pose_at(env, x)
+            assert bool(env.state.collision[0]) is expect, (env.obstacles, depth)
+        sdf = body_points(field.field_contact, field.sim.sensordata.float())[0, ..., 0].max()
+        assert abs(float(sdf) - (FACE_X + depth)) < 1e-4  # the pose is what the test says
+    assert field.sim.model.ngeom < physical.sim.model.ngeom  # the field world holds no wall
+
+
+def test_one_model_serves_worlds_of_different_scenes():
+    """Two scenes (wall at 0.2 m, wall at 1.4 m): one floor-only model; each world judged by its own scene."""
+    one, two = wall_env("field"), wall_env("field", faces=(FACE_X, 1.4))
+    assert one.world_models is None and two.world_models is None
+    assert one.sim.model.nbuffer == two.sim.model.nbuffer  # model memory does not grow with the scene count
+    assert len(obstacle_geom_ids(two.sim.model)) == 0
+    dx = front_offset(two)
+    pose_at(two, FACE_X + 0.02 - dx)  # the same pose in both worlds
+    assert two.state.collision.tolist() == [True, False]
+    tiles = wall_env("field", faces=(FACE_X, 1.4), per_world=False)  # tiles: scenes side by side, same model
+    assert tiles.sim.model.nbuffer == one.sim.model.nbuffer
+
+
+def test_warp_backend_judges_the_same_contact():
+    """sim=warp (Warp's CPU device) in field mode: the one model steps, the pose sensors give the same judgement."""
+    env = wall_env("field", faces=(FACE_X, 1.4), sim="warp")
+    ref = wall_env("field", faces=(FACE_X, 1.4))
+    x = FACE_X + 0.02 - front_offset(ref)
+    for e in (env, ref):
+        pose_at(e, x)
+    assert env.state.collision.tolist() == ref.state.collision.tolist() == [True, False]
+    for _ in range(3):
+        env.step(torch.zeros(env.num_envs, env.num_actions))
+    assert torch.isfinite(env.sim.qpos).all()
+
+
+def _fk_poses(model: mujoco.MjModel, bodies: list[str], qpos: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
+    data, ids = mujoco.MjData(model), [model.body(b).id for b in bodies]
+    pos, quat = np.zeros((len(qpos), len(ids), 3)), np.zeros((len(qpos), len(ids), 4))
+    for i, q in enumerate(qpos):
+        data.qpos[:] = q
+        mujoco.mj_kinematics(model, data)
+        pos[i], quat[i] = data.xpos[ids], data.xquat[ids]
+    return torch.tensor(pos, dtype=torch.float32), torch.tensor(quat, dtype=torch.float32)
+
+
+@pytest.fixture(scope="module")
+def agreement() -> dict[str, tuple[int, int, int, int]]:
+    """Per typical type: (steps, physical contact steps, field-only, physical-only) over random-action rollouts
+    of 16 envs x 50 steps from the env's own episode starts, physical obstacles; the field judgement is made on
+    the same states (body poses by forward kinematics after each control step)."""
+    out = {}
+    for kind in TYPICAL_KINDS:
+        sset = SceneSet.typical(kind, 16, variants=2)
+        env = TraversalEnv(EnvCfg(num_envs=16), scenes=sset, seed=0)
+        env.auto_reset = False
+        fc = FieldContact(env.sim.model, env.robot, FieldContactCfg())
+        full = FieldContact(env.sim.model, env.robot, FieldContactCfg())
+        full.cull = False
+        g = torch.Generator().manual_seed(1)
+        phys, field = [], []
+        for _ in range(50):
+            env.step(0.5 * torch.randn(16, env.num_actions, generator=g))
+            pos, quat = _fk_poses(env.sim.model, fc.bodies, env.sim.qpos.numpy())
+            sdf = fc.body_sdf(sset.bank, env.field_source.field_idx, pos, quat)
+            assert torch.equal(
+                sdf < fc.cfg.margin, full.body_sdf(sset.bank, env.field_source.field_idx, pos, quat) < fc.cfg.margin
+            )
+            phys.append(env.state.collision.clone())
+            field.append((sdf < fc.cfg.margin).any(-1))
+        p, f = torch.cat(phys), torch.cat(field)
+        out[kind] = (len(p), int(p.sum()), int((f & ~p).sum()), int((p & ~f).sum()))
+        log.info("%s: steps=%d physical=%d field_only=%d physical_only=%d", kind, *out[kind])
+    return out
+
+
+def test_field_judgement_sees_the_contacts(agreement):
+    """The judgement is not trivially 'free': most physical contacts are seen, few are invented."""
+    steps = sum(v[0] for v in agreement.values())
+    contacts = sum(v[1] for v in agreement.values())
+    field_only = sum(v[2] for v in agreement.values())
+    physical_only = sum(v[3] for v in agreement.values())
+    assert contacts > 0.02 * steps
+    assert physical_only < 0.5 * contacts and field_only < 0.5 * contacts
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="measured 98.3 % over all types, 93.9 % on side-hurdle-crouch (16 envs x 100 steps x 2 variants): the "
+    "fields' 4 cm occupancy voxels place obstacle surfaces within +-2 cm of the mesh (docs/training.md)",
+)
+def test_field_agrees_with_physical_contact_on_99_percent_of_steps(agreement):
+    worst = {k: 1.0 - (v[2] + v[3]) / v[0] for k, v in agreement.items()}
+    assert min(worst.values()) >= 0.99, worst

@@ -1,0 +1,171 @@
+"""scripts/experiment.py on real 1-iteration runs: DAG order, skip when done, resume when unfinished, a changed
+cell re-running only itself and what reads it; bad experiments refused in one line before anything is written;
+hydra's joblib launcher running two real training jobs in parallel processes."""
+
+from __future__ import annotations
+
+import logging
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+from cat.launcher import load_script
+
+REPO = Path(__file__).resolve().parents[1]
+COMMON = ["sim=mujoco", "num_envs=4", "algo.num_steps_per_env=4", "algo.save_interval=1"]
+
+
+def _write(tmp_path: Path, cells: dict, tables: dict | None = None, name: str = "exp") -> str:
+    path = tmp_path / f"{name}.yaml"
+    path.write_text(yaml.safe_dump({"common": COMMON, "cells": cells, "tables": tables or {}}))
+    return str(path)
+
+
+def _experiment(args: list[str], caplog) -> tuple[int, list[str]]:
+    mod = load_script(REPO / "scripts" / "experiment.py")
+    caplog.clear()
+    with caplog.at_level(logging.INFO):
+        code = mod.main(args)
+    return code, [r.getMessage() for r in caplog.records if r.levelno >= logging.ERROR]
+
+
+def _mtimes(root: Path) -> dict[str, float]:
+    return {str(p.relative_to(root)): p.stat().st_mtime for p in root.glob("runs/*/seed*/model_*.pt")}
+
+
+def _summary(caplog) -> str:
+    return next(r.getMessage() for r in reversed(caplog.records) if "experiment exp: ran" in r.getMessage())
+
+
+def test_dag_skip_resume_and_rerun_of_a_changed_cell(tmp_path, caplog):
+    root = tmp_path / "exps"
+    cells = {
+        "spec": {"task": "flat", "init": "prior", "iterations": 1},  # declared first, runs second
+        "prior": {"task": "flat", "iterations": 1},
+        "other": {"task": "flat", "iterations": 1, "seeds": [1]},
+    }
+    exp = _write(tmp_path, cells)
+    args = [f"experiment={exp}", f"root={root}"]
+    code, errors = _experiment(args, caplog)
+    assert code == 0 and not errors, errors
+    assert "left nothing" in _summary(caplog)
+    folder = root / "exp"
+    spec = yaml.safe_load((folder / "runs/spec/seed0/config.yaml").read_text())
+    prior_ckpt = folder / "runs/prior/seed0/model_0.pt"
+    assert spec["init"] == str(prior_ckpt)  # the specialist started from the prior's final checkpoint
+    assert prior_ckpt.stat().st_mtime < (folder / "runs/spec/seed0/model_0.pt").stat().st_mtime
+    assert (folder / "runs/other/seed1/model_0.pt").is_file()
+    first = _mtimes(folder)
+
+    code, _ = _experiment(args, caplog)  # done: nothing runs
+    assert code == 0 and "ran nothing; left nothing" in _summary(caplog) and _mtimes(folder) == first
+
+    cells["spec"]["iterations"] = 2  # a larger budget: the run is unfinished and continues in its folder
+    exp = _write(tmp_path, cells)
+    code, _ = _experiment(args, caplog)
+    assert code == 0 and "ran spec@0;" in _summary(caplog)
+    after = _mtimes(folder)
+    assert after["runs/spec/seed0/model_0.pt"] == first["runs/spec/seed0/model_0.pt"]  # resumed, not restarted
+    assert "runs/spec/seed0/model_1.pt" in after
+    assert yaml.safe_load((folder / "runs/spec/seed0/config.yaml").read_text())["resume"].endswith("model_0.pt")
+
+    cells["prior"]["overrides"] = ["algo.learning_rate=0.0002"]  # prior changed: it and spec re-run, other not
+    exp = _write(tmp_path, cells)
+    code, _ = _experiment(args, caplog)
+    assert code == 0 and "ran prior@0, spec@0;" in _summary(caplog)
+    again = _mtimes(folder)
+    assert again["runs/other/seed1/model_0.pt"] == first["runs/other/seed1/model_0.pt"]
+    assert again["runs/prior/seed0/model_0.pt"] > first["runs/prior/seed0/model_0.pt"]
+    assert again["runs/spec/seed0/model_1.pt"] > after["runs/spec/seed0/model_1.pt"]
+    assert len(list((folder / "runs/prior").glob("seed0.stale-*"))) == 1  # the old run kept aside
+
+
+def test_dry_run_prints_chains_and_writes_nothing(tmp_path, capsys, caplog):
+    cells = {
+        "prior": {"task": "flat", "iterations": 2},
+        "spec": {"init": "prior", "iterations": 3, "legs": [{"iterations": 5, "overrides": ["seed=3"]}]},
+    }
+    exp = _write(tmp_path, cells)
+    code, errors = _experiment([f"experiment={exp}", f"root={tmp_path / 'exps'}", "dry_run=true"], caplog)
+    out = capsys.readouterr().out
+    assert code == 0 and not errors
+    assert out.index("prior@0") < out.index("spec@0")
+    assert f"init={tmp_path / 'exps/exp/runs/prior/seed0/model_1.pt'}" in out
+    assert f"resume={tmp_path / 'exps/exp/runs/spec/seed0/model_2.pt'} max_iterations=5 seed=3" in out
+    assert not (tmp_path / "exps").exists()
+
+
+@pytest.mark.parametrize(
+    "cells, extra, needle",
+    [
+        (
+            {"a": {"init": "b", "iterations": 1}, "b": {"init": "a", "iterations": 1}},
+            [],
+            "cycle a -> b -> a",
+        ),
+        ({"a": {"init": "priorr", "iterations": 1}, "prior": {"iterations": 1}}, [], "did you mean prior"),
+        ({"a": {"init": "/no/such/model_3.pt", "iterations": 1}}, [], "checkpoint not found: /no/such/model_3.pt"),
+        ({"a": {"iterations": 1}}, ["hydra/launcher=nosuch"], "unknown hydra/launcher 'nosuch'"),
+        ({"a": {"iterations": 1, "tsk": "flat"}}, [], "did you mean task"),
+        ({"a": {"task": "flatt", "iterations": 1}}, [], "valid task options"),
+        ({"a": {"task": "flat"}}, [], "give one budget"),
+    ],
+)
+def test_bad_experiment_one_line_nothing_written(tmp_path, caplog, cells, extra, needle):
+    exp = _write(tmp_path, cells)
+    code, errors = _experiment([f"experiment={exp}", f"root={tmp_path / 'exps'}", *extra], caplog)
+    assert code == 2 and len(errors) == 1 and needle in errors[0], errors
+    assert not (tmp_path / "exps").exists()
+
+
+def test_unknown_experiment_and_option(caplog):
+    code, errors = _experiment(["experiment=nosuch"], caplog)
+    assert code == 2 and len(errors) == 1 and "unknown experiment 'nosuch'" in errors[0] and "smoke" in errors[0]
+    code, errors = _experiment(["experiment=smoke", "dryrun=true"], caplog)
+    assert code == 2 and len(errors) == 1 and "did you mean dry_run" in errors[0]
+
+
+def test_train_refuses_an_unknown_launcher(tmp_path, caplog):
+    mod = load_script(REPO / "scripts" / "train.py")
+    with caplog.at_level(logging.ERROR):
+        code = mod.main(["-m", "task=flat", "seed=0,1", "hydra/launcher=rayy", f"run_root={tmp_path / 'runs'}"])
+    errors = [r.getMessage() for r in caplog.records if r.levelno >= logging.ERROR]
+    assert code == 2 and len(errors) == 1 and "unknown hydra/launcher 'rayy'" in errors[0] and "joblib" in errors[0]
+    assert not (tmp_path / "runs").exists()
+
+
+def test_joblib_runs_two_real_jobs_in_parallel_processes(tmp_path):
+    sweep = tmp_path / "sweep"
+    res = subprocess.run(
+        [sys.executable, str(REPO / "scripts" / "train.py"), "-m", "task=flat", "seed=0,1", *COMMON,
+         "max_iterations=1", "torch_threads=1", "hydra/launcher=joblib", "hydra.launcher.n_jobs=2",
+         f"hydra.sweep.dir={sweep}"],
+        capture_output=True, text=True, timeout=900, env={**os.environ, "PYTHONPATH": str(REPO)}, cwd=tmp_path,
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr[-3000:]
+    assert "Joblib.Parallel(n_jobs=2" in res.stderr
+    seeds = [yaml.safe_load((sweep / k / "config.yaml").read_text())["seed"] for k in ("0", "1")]
+    assert seeds == [0, 1] and all((sweep / k / "model_0.pt").is_file() for k in ("0", "1"))
+    # each job ran in its own worker process: rsl_rl records the process in neither file, the job log line does
+    assert res.stderr.count("INFO cat.launcher: job: train.py") == 2
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("launcher", ["joblib", "submitit_local"])
+def test_smoke_end_to_end_then_nothing(tmp_path, launcher):
+    def call() -> subprocess.CompletedProcess:
+        return subprocess.run(
+            [sys.executable, str(REPO / "scripts" / "experiment.py"), "experiment=smoke", f"root={tmp_path}",
+             f"hydra/launcher={launcher}"],
+            capture_output=True, text=True, timeout=1800, env={**os.environ, "PYTHONPATH": str(REPO)},
+        )  # fmt: skip
+
+    res = call()
+    assert res.returncode == 0 and "left nothing" in res.stderr, res.stderr[-3000:]
+    assert (tmp_path / "smoke/tables/table1/trials.csv").is_file()
+    res = call()
+    assert res.returncode == 0 and "ran nothing; left nothing" in res.stderr, res.stderr[-3000:]

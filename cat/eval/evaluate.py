@@ -62,7 +62,7 @@ def check_policy(run: MethodRun, opts: EvalCfg, sim: str, device: str) -> None:
     """Fail early when a checkpoint does not fit the observation layout of its own config.yaml."""
     if run.checkpoint is None:
         return
-    env = make_eval_env(run.config.task, None, 1, opts, sim, device)
+    env = make_eval_env(run.config.task, None, 1, opts, sim, device, run.config.sim.obstacles)
     try:
         quiet_load_policy(run.checkpoint, env, run)
     except UnsafeCheckpointError as err:
@@ -132,7 +132,8 @@ def evaluate(cfg: EvalTableCfg) -> tuple[list[dict[str, str]], dict[str, str]]:
                         continue
                     ts = trials[table, group.name]
                     n = min(len(ts), opts.max_envs)
-                    env = make_eval_env(run.config.task, group, n, opts, cfg.sim, cfg.device)
+                    trained = run.config.sim.obstacles  # evaluation is physical whatever it says
+                    env = make_eval_env(run.config.task, group, n, opts, cfg.sim, cfg.device, trained)
                     if run.checkpoint is None:
                         policy = HoldPolicy(env.num_actions)
                     else:

@@ -97,7 +97,10 @@ def make_env(cfg: TrainCfg, num_envs: int | None = None) -> TraversalEnv:
             scenes = SceneSet.from_dir(task.scene_dir, num_envs=n, kind=task.scene_kind, **kw)
         else:
             scenes = SceneSet.typical(task.scene_kind, n, task.scene_variants, task.scene_seed, **kw)
-    return TraversalEnv(task, sim=cfg.sim.backend, device=cfg.sim.device, scenes=scenes, seed=cfg.seed)
+    sim, fc = cfg.sim, cfg.sim.field_contact
+    return TraversalEnv(
+        task, sim.backend, sim.device, scenes=scenes, seed=cfg.seed, obstacles=sim.obstacles, field_contact=fc
+    )
 
 
 def new_run_dir(cfg: TrainCfg) -> Path:

@@ -175,7 +175,9 @@ def test_conversion_refuses_an_arbitrary_object(tmp_path):
 
 def test_converted_shipped_snapshot_keeps_the_weights_beside_it(tmp_path):
     """The conversion touches env snapshots only: a shipped model file passes through unchanged."""
-    src = next(p for p in SHIPPED if p.name.startswith("model_"))
+    src = next((p for p in SHIPPED if p.name.startswith("model_")), None)
+    if src is None:
+        pytest.skip("no shipped checkpoints in this tree")
     copy = tmp_path / src.name
     shutil.copy2(src, copy)
     assert convert_file(copy) is False and copy.read_bytes() == src.read_bytes()

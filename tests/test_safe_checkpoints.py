@@ -114,6 +114,17 @@ def test_every_entry_point_refuses_it(tmp_path, caplog, script, args):
     assert not any((tmp_path / name).exists() for name in ("out", "shipped", "policy.onnx", "runs"))
 
 
+def test_distillation_teachers_refuse_it(tmp_path):
+    """A teacher named in ``teachers=[...]`` is read by the safe loader when the specialists are listed."""
+    from cat.learning.distill import TeacherError, load_specialists
+
+    marker = tmp_path / "ran"
+    ckpt = _evil_run(tmp_path / "run", marker)
+    with pytest.raises(TeacherError, match=f"teacher {ckpt}: {ckpt}: refused"):
+        load_specialists([str(ckpt)])
+    assert not marker.exists()
+
+
 def test_resume_refuses_a_pickled_env_snapshot(tmp_path, caplog):
     """A safe model file beside an unsafe ``env_<it>.pt``: the resume stops before building anything."""
     marker = tmp_path / "ran"

@@ -84,6 +84,7 @@ def load_specialists(checkpoints: list[str]) -> list[Specialist]:
         try:
             path = str(resolve_checkpoint(ckpt))
             run = load_run_config(path)
+            read_checkpoint(path)  # the safe loader refuses an unsafe file here, before any runner is built
         except CheckpointError as err:
             raise TeacherError(f"teacher {ckpt}: {err}") from None
         if run.algo.name != "ppo":

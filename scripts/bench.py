@@ -15,14 +15,19 @@ COMMANDS = {
     "soak": "cat.bench.soak",
     "live": "cat.bench.live",
 }
+SCENE_TRAIN_FLAGS = ("--scenes", "--obstacles", "--scene-dir")
+"""``train`` with any of these measures a scene set (``cat.bench.train_obstacles``) instead of flat ground."""
 
 
 def main(argv: list[str]) -> int:
     if not argv or argv[0] not in COMMANDS:
         print(f"usage: bench.py {{{'|'.join(COMMANDS)}}} [args]", file=sys.stderr)
         return 2
+    name = COMMANDS[argv[0]]
+    if argv[0] == "train" and any(a.split("=")[0] in SCENE_TRAIN_FLAGS for a in argv[1:]):
+        name = "cat.bench.train_obstacles"  # training on a scene set, physical or field obstacles
     try:
-        module = importlib.import_module(COMMANDS[argv[0]])
+        module = importlib.import_module(name)
     except ImportError as err:
         print(f"benchmark {argv[0]!r} unavailable: {err}", file=sys.stderr)
         return 2

@@ -202,3 +202,74 @@ def test_field_judgement_sees_the_contacts(agreement):
 def test_field_agrees_with_physical_contact_on_99_percent_of_steps(agreement):
     worst = {k: 1.0 - (v[2] + v[3]) / v[0] for k, v in agreement.items()}
     assert min(worst.values()) >= 0.99, worst
+
+
+def slab_scene() -> Scene:
+    """A slab at shin height across the start region: every trial starts in physical contact with it."""
+    return Scene(
+        mesh=box((-0.9, -0.6, 0.25), (-0.1, 0.6, 0.31)),
+        bounds=np.array([[-1.5, -1.2, 0.0], [1.5, 1.2, 1.8]]),
+        start=np.array([-0.5, 0.0, 0.75]),
+        goals=np.array([[1.0, 0.0, 0.75]]),
+        kind="slab",
+    )
+
+
+def test_evaluation_of_a_field_trained_run_is_physical(tmp_path, caplog, monkeypatch):
+    """play.py on a run whose config.yaml says sim.obstacles=field: physical obstacles, real contacts counted
+    (per-body contact sensors exist only in a physical world: FirstContacts refuses a field env)."""
+    from omegaconf import OmegaConf
+
+    import cat.learning.play as play_mod
+    from cat.learning.hydra_cfg import load_config
+    from cat.learning.play import PlayCfg, play_trials
+    from cat.learning.runs import train
+
+    cfg = load_config(
+        ["task=hurdle_crouch", "num_envs=8", "max_iterations=1", f"run_root={tmp_path}", "algo.num_steps_per_env=8"]
+        + ["task.scene_variants=1", "task.warmup_variants=0", "sim.obstacles=field"]
+    )
+    run = train(cfg)
+    assert OmegaConf.load(run / "config.yaml").sim.obstacles == "field"
+    slab_scene().save(tmp_path / "slab" / "s0")
+    built = []
+    make = play_mod.make_eval_env
+
+    def recording(*args, **kw):  # the real make_eval_env; only remembers the env it built
+        built.append(make(*args, **kw))
+        return built[-1]
+
+    monkeypatch.setattr(play_mod, "make_eval_env", recording)
+    play = PlayCfg(checkpoint=str(run), episodes=2, scene_dir=str(tmp_path / "slab"), contacts=True, time_s=0.2)
+    with caplog.at_level(logging.INFO, logger="cat.eval.runner"):
+        _, results, _, first = play_trials(play)
+    assert [e.obstacles for e in built] == ["physical"]
+    assert len(obstacle_geom_ids(built[0].sim.model)) > 0  # the slab is geometry in the evaluation world
+    assert all(r.collided for r in results) and all(b is not None for b in first)
+    assert "trained with sim.obstacles=field: evaluation builds physical obstacles" in caplog.text
+
+
+@pytest.mark.parametrize("mode", ["field", "physical"])
+def test_bench_train_on_a_scene_set_prints_its_line(mode, tmp_path, capsys):
+    """``scripts/bench.py train --scenes N --obstacles MODE`` at a tiny size (generated scenes, or a folder)."""
+    import importlib.util
+    import re
+    from pathlib import Path
+
+    spec = importlib.util.spec_from_file_location("bench_script", Path(__file__).parents[1] / "scripts" / "bench.py")
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    args = ["train", "--scenes", "2", "--obstacles", mode, "--num-envs", "8", "--iterations", "1", "--seconds", "0.2"]
+    if mode == "physical":
+        for i, face in enumerate((FACE_X, 1.4)):
+            wall_scene(face).save(tmp_path / f"w{i}")
+        args += ["--scene-dir", str(tmp_path)]
+    assert bench.main([*args, "algo.num_steps_per_env=4", "torch_threads=1"]) == 0
+    line = capsys.readouterr().out.strip().splitlines()[-1]
+    pattern = (
+        rf"case=train scenes=2 obstacles={mode} num_envs=8 env_steps_per_s=(\d+) raw_flat_env_steps_per_s=(\d+) "
+        r"ratio=([\d.]+)"
+    )
+    m = re.fullmatch(pattern, line)
+    assert m is not None, line
+    assert int(m.group(1)) > 0 and int(m.group(2)) > 0

@@ -77,6 +77,7 @@ def convert_file(path: Path) -> bool:
         same = before.keys() == after.keys() and all(_same_bits(before[k], after[k]) for k in before)
         if _has_tensordict(new) or not same:
             raise CheckpointError(f"{path}: the rewrite does not hold the same tensors; left as it was")
+        os.chmod(tmp, path.stat().st_mode & 0o777)  # mkstemp's 0600 would hide the file from other users
         os.replace(tmp, path)
     finally:
         if os.path.exists(tmp):

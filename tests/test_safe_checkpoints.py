@@ -164,7 +164,9 @@ def test_conversion_is_bit_identical_and_idempotent(tmp_path):
     torch.save(old, path)
     assert isinstance(read_env_snapshot(path)["obs"], TensorDict)  # the old format keeps loading
     assert _bare_torch_loads([path]).returncode != 0  # ... but only where tensordict is imported
+    path.chmod(0o644)
     assert convert_file(path) is True
+    assert path.stat().st_mode & 0o777 == 0o644  # readable as before, not the temporary file's 0600
     new = read_env_snapshot(path)
     assert type(new["obs"]) is dict and new["steps"] == 7
     torch.testing.assert_close(new["obs"]["actor"], obs["actor"], rtol=0, atol=0)

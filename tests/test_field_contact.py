@@ -215,23 +215,32 @@ def slab_scene() -> Scene:
     )
 
 
-def test_evaluation_of_a_field_trained_run_is_physical(tmp_path, caplog, monkeypatch):
-    """play.py on a run whose config.yaml says sim.obstacles=field: physical obstacles, real contacts counted
-    (per-body contact sensors exist only in a physical world: FirstContacts refuses a field env)."""
+@pytest.fixture(scope="module")
+def field_run(tmp_path_factory):
+    """A 1-iteration hurdle-crouch run trained with sim.obstacles=field, and a folder with the slab scene."""
     from omegaconf import OmegaConf
 
-    import cat.learning.play as play_mod
     from cat.learning.hydra_cfg import load_config
-    from cat.learning.play import PlayCfg, play_trials
     from cat.learning.runs import train
 
+    root = tmp_path_factory.mktemp("field_run")
     cfg = load_config(
-        ["task=hurdle_crouch", "num_envs=8", "max_iterations=1", f"run_root={tmp_path}", "algo.num_steps_per_env=8"]
+        ["task=hurdle_crouch", "num_envs=8", "max_iterations=1", f"run_root={root}", "algo.num_steps_per_env=8"]
         + ["task.scene_variants=1", "task.warmup_variants=0", "sim.obstacles=field"]
     )
     run = train(cfg)
     assert OmegaConf.load(run / "config.yaml").sim.obstacles == "field"
-    slab_scene().save(tmp_path / "slab" / "s0")
+    slab_scene().save(root / "slab" / "s0")
+    return run, root / "slab"
+
+
+def test_evaluation_of_a_field_trained_run_is_physical(field_run, caplog, monkeypatch):
+    """play.py on a run whose config.yaml says sim.obstacles=field: physical obstacles, real contacts counted
+    (per-body contact sensors exist only in a physical world: FirstContacts refuses a field env)."""
+    import cat.learning.play as play_mod
+    from cat.learning.play import PlayCfg, play_trials
+
+    run, slab = field_run
     built = []
     make = play_mod.make_eval_env
 
@@ -240,13 +249,31 @@ def test_evaluation_of_a_field_trained_run_is_physical(tmp_path, caplog, monkeyp
         return built[-1]
 
     monkeypatch.setattr(play_mod, "make_eval_env", recording)
-    play = PlayCfg(checkpoint=str(run), episodes=2, scene_dir=str(tmp_path / "slab"), contacts=True, time_s=0.2)
+    play = PlayCfg(checkpoint=str(run), episodes=2, scene_dir=str(slab), contacts=True, time_s=0.2)
     with caplog.at_level(logging.INFO, logger="cat.eval.runner"):
         _, results, _, first = play_trials(play)
     assert [e.obstacles for e in built] == ["physical"]
     assert len(obstacle_geom_ids(built[0].sim.model)) > 0  # the slab is geometry in the evaluation world
     assert all(r.collided for r in results) and all(b is not None for b in first)
     assert "trained with sim.obstacles=field: evaluation builds physical obstacles" in caplog.text
+
+
+def test_click_demo_of_a_field_trained_run_counts_physical_contacts(field_run, caplog, capsys):
+    """The headless click demo with the field-trained checkpoint, toes in a wall at the start: contacts counted."""
+    import re
+
+    from cat.deploy.cli import main
+
+    run, slab = field_run
+    ckpt = sorted(run.glob("model_*.pt"))[-1]
+    folder = slab.parent / "wall_at_toes"
+    wall_scene(face_x=-0.5 + 0.12 - 0.03).save(folder)  # the toes (0.12 m ahead of the root) 3 cm into the wall
+    with caplog.at_level(logging.INFO, logger="cat.deploy.runtime"):
+        code = main([f"scene={folder}", f"checkpoint={ckpt}", "goal=-0.9,0.8", "time_limit=0.3", "realtime=false"])
+    assert code == 0
+    m = re.search(r"collisions=(\d+)", capsys.readouterr().out)
+    assert m is not None and int(m.group(1)) >= 1
+    assert "trained with sim.obstacles=field: the demo simulates physical obstacles" in caplog.text
 
 
 @pytest.mark.parametrize("mode", ["field", "physical"])

@@ -127,6 +127,9 @@ class Runtime:
         self.field_cfg = field_cfg or FieldCfg()
         has_obstacles = len(scene.mesh.faces) > 0
         self.model = build_env_model(self.robot, (lambda s: add_obstacles_to_spec(s, scene)) if has_obstacles else None)
+        trained = spec.run.sim.obstacles if spec.run is not None else "physical"
+        if trained != "physical":  # the demo's world always holds the obstacle geometry and counts real contacts
+            log.info("the policy trained with sim.obstacles=%s: the demo simulates physical obstacles", trained)
         self.data = mujoco.MjData(self.model)
         self.fk = RobotFK(self.robot)
         lo, hi = scene.bounds[0, :2] - self.deploy.map_margin, scene.bounds[1, :2] + self.deploy.map_margin

@@ -169,3 +169,38 @@ def test_smoke_end_to_end_then_nothing(tmp_path, launcher):
     assert (tmp_path / "smoke/tables/table1/trials.csv").is_file()
     res = call()
     assert res.returncode == 0 and "ran nothing; left nothing" in res.stderr, res.stderr[-3000:]
+
+
+def _leaves(d: dict, prefix: str = "") -> dict:
+    out = {}
+    for k, v in d.items():
+        if isinstance(v, dict) and v:
+            out.update(_leaves(v, f"{prefix}{k}."))
+        else:
+            out[prefix + k] = v
+    return out
+
+
+def test_shipped_recipes_compose_the_shipped_configs(tmp_path):
+    """experiment=shipped: each cell's overrides (all legs) give its checkpoint's config.yaml, and its chain ends
+    at the shipped model_<it>.pt."""
+    from omegaconf import OmegaConf
+
+    from cat.experiment.plan import VOLATILE, Plan
+    from cat.experiment.spec import load_experiment
+    from cat.learning.hydra_cfg import load_config
+    from cat.learning.runs import load_run_config
+
+    exp = load_experiment("shipped")
+    plan = Plan(exp, str(tmp_path))
+    shipped = sorted(p.name for p in (REPO / "checkpoints").iterdir() if (p / "config.yaml").is_file())
+    assert shipped and set(shipped) <= set(exp.cells)
+    for name in shipped:
+        unit = plan.units[f"{name}@0"]
+        ckpt = REPO / "checkpoints" / name / unit.checkpoint().name
+        assert ckpt.is_file(), f"{name}: the recipe ends at {ckpt.name}, not shipped"
+        overrides = unit.base + [o for leg in unit.cell.legs for o in leg.overrides]
+        mine = _leaves(OmegaConf.to_container(OmegaConf.structured(load_config(overrides))))
+        theirs = _leaves(OmegaConf.to_container(OmegaConf.structured(load_run_config(ckpt))))
+        keys = {k for k in set(mine) | set(theirs) if k.split(".")[0] not in VOLATILE and k != "seed"}
+        assert {k: (mine.get(k), theirs.get(k)) for k in keys if mine.get(k) != theirs.get(k)} == {}, name

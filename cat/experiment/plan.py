@@ -119,21 +119,31 @@ class Plan:
         return unit
 
     def _ref(self, ref: str, seed: int) -> str:
-        """A cell reference -> the upstream unit key (same seed if that cell has it, else its first)."""
-        if ref in self.exp.cells:
-            seeds = self.exp.cells[ref].seeds
-            return f"{ref}@{seed if seed in seeds else seeds[0]}"
-        return ref
+        """A cell reference -> the upstream unit key (same seed if that cell has it, else its first), with
+        ``/model_<it>.pt`` kept when it names a file of the run."""
+        cell = self.exp.cell_of(ref)
+        if cell is None:
+            return ref
+        seeds = self.exp.cells[cell[0]].seeds
+        key = f"{cell[0]}@{seed if seed in seeds else seeds[0]}"
+        return f"{key}/{cell[1]}" if cell[1] else key
+
+    def unit_of(self, ref: str) -> tuple[Unit, str | None] | None:
+        key, _, file = ref.partition("/")
+        return (self.units[key], file or None) if key in self.units else None
 
     def identity(self, ref: str) -> str:
-        if ref in self.units:
-            u = self.units[ref]
-            return f"{u.hash}:{u.final}:{u.cell.minutes}"
+        if (found := self.unit_of(ref)) is not None:
+            u, file = found
+            return f"{u.hash}:{file or u.final}:{u.cell.minutes}"
         return f"{ref}:{file_digest(ref)}" if Path(ref).is_file() else ref
 
     def path_of(self, ref: str) -> str:
-        """A unit key or a checkpoint path -> the checkpoint file to read."""
-        return str(self.units[ref].checkpoint()) if ref in self.units else ref
+        """A unit key (``/model_<it>.pt``) or a checkpoint path -> the checkpoint file to read."""
+        if (found := self.unit_of(ref)) is None:
+            return ref
+        u, file = found
+        return str(u.run_dir / file) if file else str(u.checkpoint())
 
     def units_of(self, names: list[str]) -> list[Unit]:
         return [u for u in self.units.values() if u.cell.name in names]
@@ -209,10 +219,11 @@ class Plan:
         """Unit keys (every seed of a referenced cell) and checkpoint paths the table reads."""
         out = []
         for ref in table.references():
-            if ref in self.exp.cells:
-                out += [f"{ref}@{s}" for s in self.exp.cells[ref].seeds]
-            else:
+            cell = self.exp.cell_of(ref)
+            if cell is None:
                 out.append(ref)
+            else:
+                out += [f"{cell[0]}@{s}" + (f"/{cell[1]}" if cell[1] else "") for s in self.exp.cells[cell[0]].seeds]
         return out
 
     def manifest(self, table: Table) -> dict:
@@ -221,9 +232,12 @@ class Plan:
         def paths(entries: list) -> list[str]:
             out = []
             for e in entries:
-                e = str(e)
-                keys = [f"{e}@{s}" for s in self.exp.cells[e].seeds] if e in self.exp.cells else [e]
-                out += [self.path_of(k) if k in self.units else k for k in keys]
+                cell = self.exp.cell_of(str(e))
+                if cell is None:
+                    out.append(str(e))
+                    continue
+                tail = f"/{cell[1]}" if cell[1] else ""
+                out += [self.path_of(f"{cell[0]}@{s}{tail}") for s in self.exp.cells[cell[0]].seeds]
             return out
 
         methods = {}

@@ -5,6 +5,7 @@ nothing."""
 from __future__ import annotations
 
 import logging
+import shlex
 import shutil
 import time
 from dataclasses import dataclass
@@ -34,7 +35,8 @@ class ExperimentCfg:
 
 
 def _cmd(script: str, overrides: list[str]) -> str:
-    return f"python scripts/{script}.py " + " ".join(overrides)
+    """The command line, quoted for a POSIX shell (lists and dicts hold brackets and braces)."""
+    return f"python scripts/{script}.py " + " ".join(shlex.quote(o) for o in overrides)
 
 
 class Runner:
@@ -109,7 +111,8 @@ class Runner:
         return 1 if self.failed else 0
 
     def _ref_ready(self, ref: str) -> bool:
-        return ref not in self.plan.units or self.plan.status(self.plan.units[ref]) == "done"
+        found = self.plan.unit_of(ref)
+        return found is None or self.plan.status(found[0]) == "done"
 
     def _inputs_ready(self, unit: Unit) -> bool:
         return all(self._ref_ready(r) for r in unit.inputs.values())

@@ -11,7 +11,8 @@ cells:
     overrides: [num_envs=4096]
   crouch:
     task: crouch_pass
-    init: prior              # another cell (same seed, else its first) or a checkpoint path
+    init: prior              # another cell (same seed, else its first) or a checkpoint path; prior/model_99.pt:
+                             # that file of the cell's run (a leg's end: model_<leg iterations - 1>.pt)
     iterations: 600
     legs:                    # optional: resumed legs after the first, each up to its own iteration count
       - {iterations: 900, overrides: [task.ghost_share=0.5]}
@@ -33,6 +34,7 @@ cycle.
 from __future__ import annotations
 
 import os
+import re
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
@@ -106,10 +108,20 @@ class Experiment:
     root: str = "experiments"
     note: str = ""
 
+    def cell_of(self, ref: str) -> tuple[str, str | None] | None:
+        """``prior`` -> (prior, None) (its final checkpoint); ``prior/model_99.pt`` -> (prior, model_99.pt);
+        None for a checkpoint path."""
+        if ref in self.cells:
+            return ref, None
+        head, _, tail = ref.partition("/")
+        if head in self.cells and re.fullmatch(r"model_\d+\.pt", tail):
+            return head, tail
+        return None
+
     def deps(self, name: str) -> list[str]:
         """Cells that cell or table ``name`` reads."""
         refs = self.cells[name].inputs() if name in self.cells else self.tables[name].references()
-        return list(dict.fromkeys(r for r in refs if r in self.cells))
+        return list(dict.fromkeys(c[0] for r in refs if (c := self.cell_of(r))))
 
     def stages(self) -> list[list[str]]:
         """Cells grouped by depth in the DAG (a cell runs after every cell it reads); tables come after."""
@@ -264,7 +276,11 @@ def load_experiment(name: str) -> Experiment:
 
 
 def _check_reference(exp: Experiment, what: str, ref: str) -> None:
-    if ref in exp.cells:
+    cell = exp.cell_of(ref)
+    if cell is not None:
+        last = exp.cells[cell[0]].legs[-1].iterations if exp.cells[cell[0]].legs else exp.cells[cell[0]].iterations
+        if cell[1] and last is not None and int(cell[1][6:-3]) >= last:
+            raise ExperimentError(f"{what}: {ref} is past the cell's last iteration ({last - 1})")
         return
     if os.sep in ref or ref.endswith(".pt"):
         if not Path(ref).is_file():

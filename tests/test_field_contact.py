@@ -131,6 +131,21 @@ def test_one_model_serves_worlds_of_different_scenes():
     assert tiles.sim.model.nbuffer == one.sim.model.nbuffer
 
 
+def test_reward_termination_and_trial_read_the_field_judgement():
+    """The same pose in two worlds, one 2 cm into its wall: the collision reward, the collision termination and the
+    trial's collided flag (success rule, curriculum outcome) follow the field judgement, world by world."""
+    env = wall_env("field", faces=(FACE_X, 1.4))
+    env.cfg.terminations.on_collision = True
+    env.auto_reset = False
+    pose_at(env, FACE_X + 0.02 - front_offset(env))
+    env.step(torch.zeros(env.num_envs, env.num_actions))
+    assert env.state.collision.tolist() == [True, False]
+    assert env.termination_flags["collided"].tolist() == [True, False]
+    assert env.trial.collided.tolist() == [True, False]
+    assert env.episode_sums["collision"][0] < 0 and env.episode_sums["collision"][1] == 0
+    assert not env.episode_success(torch.tensor([0])).item()
+
+
 def test_warp_backend_judges_the_same_contact():
     """sim=warp (Warp's CPU device) in field mode: the one model steps, the pose sensors give the same judgement."""
     env = wall_env("field", faces=(FACE_X, 1.4), sim="warp")

@@ -84,6 +84,27 @@ def test_dag_skip_resume_and_rerun_of_a_changed_cell(tmp_path, caplog):
     assert len(list((folder / "runs/prior").glob("seed0.stale-*"))) == 1  # the old run kept aside
 
 
+def test_a_run_made_by_hand_is_adopted_and_an_interrupted_one_resumes(tmp_path, caplog):
+    from cat.experiment.plan import Plan
+    from cat.experiment.spec import load_experiment
+
+    exp = _write(tmp_path, {"prior": {"task": "flat", "iterations": 2}})
+    args = [f"experiment={exp}", f"root={tmp_path / 'exps'}"]
+    plan = Plan(load_experiment(exp), str(tmp_path / "exps"))
+    fresh = plan.fresh_overrides(plan.units["prior@0"])  # the command dry_run prints, run by hand
+    assert load_script(REPO / "scripts" / "train.py").main(fresh) == 0
+    code, _ = _experiment(args, caplog)
+    assert code == 0 and "ran nothing; left nothing" in _summary(caplog)
+
+    run = tmp_path / "exps/exp/runs/prior/seed0"
+    first = (run / "model_0.pt").stat().st_mtime
+    (run / "model_1.pt").unlink()  # as if the sitting had been killed after the first checkpoint
+    code, _ = _experiment(args, caplog)
+    assert code == 0 and "ran prior@0;" in _summary(caplog) and (run / "model_1.pt").is_file()
+    assert (run / "model_0.pt").stat().st_mtime == first  # continued from it, not restarted
+    assert yaml.safe_load((run / "config.yaml").read_text())["resume"] == str(run / "model_0.pt")
+
+
 def test_dry_run_prints_chains_and_writes_nothing(tmp_path, capsys, caplog):
     cells = {
         "prior": {"task": "flat", "iterations": 2},

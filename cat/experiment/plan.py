@@ -38,6 +38,14 @@ def latest_checkpoint(run_dir: Path) -> tuple[int, Path] | None:
     return max(found) if found else None
 
 
+def _comparable(cfg) -> dict:
+    """A TrainCfg as a dict without the keys that do not change what a run learns."""
+    out = OmegaConf.to_container(OmegaConf.structured(cfg))
+    for key in VOLATILE:
+        out.pop(key, None)
+    return out
+
+
 def file_digest(path: str | Path) -> str:
     h = hashlib.sha256()
     with open(path, "rb") as f:
@@ -106,10 +114,7 @@ class Plan:
             per_iter = (cfg.num_envs or cfg.task.num_envs) * cfg.algo.num_steps_per_env
             iterations = math.ceil(cell.env_steps / per_iter)
         unit = Unit(cell, seed, self.folder / "runs" / cell.name / f"seed{seed}", base, iterations)
-        resolved = OmegaConf.to_container(OmegaConf.structured(cfg))
-        for key in VOLATILE:
-            resolved.pop(key, None)
-        ident = {"config": resolved, "legs": [[leg.iterations, leg.overrides] for leg in cell.legs]}
+        ident = {"config": _comparable(cfg), "legs": [[leg.iterations, leg.overrides] for leg in cell.legs]}
         if cell.init:
             unit.inputs["init"] = self._ref(cell.init, seed)
         for k, teacher in enumerate(cell.teachers):
@@ -170,12 +175,36 @@ class Plan:
     def minutes_used(self, unit: Unit) -> float:
         return float(self.state["units"].get(unit.key, {}).get("minutes", 0.0))
 
+    def adoptable(self, unit: Unit) -> bool:
+        """A run that the state does not know (its printed command run by hand, e.g. under torchrun) is the
+        unit's when its config.yaml is the unit's config at the leg it stands in, with the expected inputs."""
+        from cat.learning.runs import load_run_config
+
+        latest = latest_checkpoint(unit.run_dir)
+        if latest is None or not (unit.run_dir / "config.yaml").is_file():
+            return False
+        try:
+            theirs = _comparable(load_run_config(latest[1]))
+            legs = unit.cell.legs
+            # the config after each leg (a leg's keys are in it once the run resumed into that leg)
+            mine = [_comparable(load_config([*unit.base, *(o for leg in legs[:j] for o in leg.overrides)]))
+                    for j in range(len(legs) + 1)]  # fmt: skip
+            raw = load_run_config(latest[1])
+        except Exception:  # an unreadable or foreign config: not this unit's run
+            return False
+        fresh = dict(o.split("=", 1) for o in self.fresh_overrides(unit))
+        teachers = [t for t in fresh.get("teachers", "[]").strip("[]").split(",") if t]
+        return theirs in mine and (raw.init or None) == fresh.get("init") and list(raw.teachers) == teachers
+
     def status(self, unit: Unit) -> str:
         """``done``, ``resume`` (same hash, an earlier checkpoint), ``stale`` (another hash) or ``run``."""
         latest = latest_checkpoint(unit.run_dir)
         recorded = self.state["units"].get(unit.key, {}).get("hash")
         if latest is None:
             return "run"
+        if recorded is None and self.adoptable(unit):
+            self.state["units"][unit.key] = {"hash": unit.hash, "run_dir": str(unit.run_dir), "adopted": True}
+            recorded = unit.hash
         if recorded != unit.hash:
             return "stale"
         it, _ = latest

@@ -99,7 +99,10 @@ def launcher_options() -> list[str]:
 
 
 def check_launcher(hydra_args: list[str]) -> None:
-    """``LauncherError`` naming an unknown ``hydra/launcher=`` choice, with the installed ones."""
+    """``LauncherError`` naming an unknown ``hydra/launcher=`` choice (with the installed ones) or a launcher key
+    the chosen launcher does not have."""
+    if not hydra_args:
+        return
     for item in hydra_args:
         if item.split("=", 1)[0].lstrip("+") == "hydra/launcher":
             name = item.split("=", 1)[1]
@@ -107,6 +110,10 @@ def check_launcher(hydra_args: list[str]) -> None:
             if name not in options:
                 hint = " (ray: pip install hydra-ray-launcher)" if name.startswith("ray") else ""
                 raise LauncherError(f"unknown hydra/launcher {name!r}{hint}; installed: {', '.join(options)}")
+    try:
+        _compose(_hydra("check"), hydra_args)
+    finally:
+        GlobalHydra.instance().clear()
 
 
 def _compose(hydra, hydra_args: list[str]):
@@ -114,8 +121,10 @@ def _compose(hydra, hydra_args: list[str]):
 
     try:
         return hydra.config_loader.load_configuration(LAUNCH_CONFIG, [*QUIET, *hydra_args], RunMode.MULTIRUN)
-    except Exception as err:
-        raise LauncherError(f"bad launcher override: {str(err).splitlines()[0]}") from None
+    except Exception as err:  # hydra names the key; its cause says what is wrong with it
+        reason = err.__cause__ or err.__context__
+        detail = f": {str(reason).splitlines()[0]}" if reason is not None and str(reason) else ""
+        raise LauncherError(f"bad launcher override: {str(err).splitlines()[0]}{detail}") from None
 
 
 def launch(path: str | Path, jobs: list[list[str]], hydra_args: list[str], name: str | None = None) -> list[int]:

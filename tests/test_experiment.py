@@ -131,6 +131,7 @@ def test_dry_run_prints_chains_and_writes_nothing(tmp_path, capsys, caplog):
         ({"a": {"init": "priorr", "iterations": 1}, "prior": {"iterations": 1}}, [], "did you mean prior"),
         ({"a": {"init": "/no/such/model_3.pt", "iterations": 1}}, [], "checkpoint not found: /no/such/model_3.pt"),
         ({"a": {"iterations": 1}}, ["hydra/launcher=nosuch"], "unknown hydra/launcher 'nosuch'"),
+        ({"a": {"iterations": 1}}, ["hydra/launcher=joblib", "hydra.launcher.n_jobz=2"], "'hydra.launcher.n_jobz'"),
         ({"a": {"iterations": 1, "tsk": "flat"}}, [], "did you mean task"),
         ({"a": {"task": "flatt", "iterations": 1}}, [], "valid task options"),
         ({"a": {"task": "flat"}}, [], "give one budget"),

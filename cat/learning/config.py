@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from cat.envs.config import EnvCfg
-from cat.envs.field_contact import FieldContactCfg
+from cat.envs.field_contact import FieldContactCfg, check_obstacles
 
 
 @dataclass
@@ -19,6 +19,9 @@ class SimCfg:
     # (cat/envs/field_contact.py, docs/training.md "Obstacles as fields"). Evaluation is always physical.
     obstacles: str = "physical"
     field_contact: FieldContactCfg = field(default_factory=FieldContactCfg)  # margin and spacing of field contact
+
+    def __post_init__(self) -> None:
+        check_obstacles(self.obstacles)  # a typo fails at load, before any scene is built
 
 
 ALGOS = ("ppo", "distill")

@@ -12,12 +12,13 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from cat.terrain import GOAL_HEIGHT, TYPICAL_KINDS, Scene, SceneError, make_typical
+from cat.terrain import GOAL_HEIGHT, TYPICAL_KINDS, Scene, SceneError, kind_name, make_typical
 from cat.terrain.scene import MESH_SUFFIXES, SCENE_FILE
 from cat.terrain.voxel import reachable_mask
 
 FLAT = "flat"
 FLAT_BOUNDS = np.array([[-4.0, -4.0, 0.0], [8.0, 4.0, 1.5]])  # the window stays clear of the fence near the start
+MESH_REACH = 2.56  # a mesh scene's map spans at least the robot's 5.12 m field window around its start [m]
 
 
 class GoalError(ValueError):
@@ -27,12 +28,14 @@ class GoalError(ValueError):
 def load_scene(spec: str, start_xy: tuple[float, float] | None = None, seed: int = 0) -> Scene:
     """``flat``, a typical type (``hurdle-crouch``, ...), a scene folder (``scene.json``) or a mesh file.
 
-    A mesh file becomes a scene with bounds around it; its start is ``start_xy`` (default the origin)."""
+    Typical types may be spelt as tasks are (``hurdle_crouch``). A mesh file becomes a scene whose map spans the
+    mesh and the robot's 5.12 m field window around the start ``start_xy`` (default the origin), so a goal
+    beside a small mesh (a pillar) is on the map."""
     path = Path(spec)
     if spec == FLAT:
         scene = Scene(trimesh.Trimesh(), FLAT_BOUNDS, start=(0.0, 0.0), goals=[(2.0, 0.0)], kind=FLAT)
-    elif spec in TYPICAL_KINDS:
-        scene = make_typical(spec, difficulty=0.5, seed=seed)
+    elif kind_name(spec) in TYPICAL_KINDS and not path.exists():
+        scene = make_typical(kind_name(spec), difficulty=0.5, seed=seed)
     elif path.is_dir():
         if not (path / SCENE_FILE).is_file():
             raise SceneError(f"{path}: not a scene folder (no {SCENE_FILE})")
@@ -40,6 +43,11 @@ def load_scene(spec: str, start_xy: tuple[float, float] | None = None, seed: int
     elif path.suffix.lower() in MESH_SUFFIXES:
         start = (0.0, 0.0) if start_xy is None else start_xy
         scene = Scene.from_mesh(path, start=start, goal=start)  # goals come from the user
+        window = np.array(
+            [[start[0] - MESH_REACH, start[1] - MESH_REACH], [start[0] + MESH_REACH, start[1] + MESH_REACH]]
+        )
+        scene.bounds[0, :2] = np.minimum(scene.bounds[0, :2], window[0])
+        scene.bounds[1, :2] = np.maximum(scene.bounds[1, :2], window[1])
     else:
         kinds = ", ".join((FLAT, *TYPICAL_KINDS))
         raise SceneError(f"scene {spec!r} is not a typical type ({kinds}), a scene folder or a mesh file")

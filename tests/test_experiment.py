@@ -226,3 +226,11 @@ def test_shipped_recipes_compose_the_shipped_configs(tmp_path):
         theirs = _leaves(OmegaConf.to_container(OmegaConf.structured(load_run_config(ckpt))))
         keys = {k for k in set(mine) | set(theirs) if k.split(".")[0] not in VOLATILE and k != "seed"}
         assert {k: (mine.get(k), theirs.get(k)) for k in keys if mine.get(k) != theirs.get(k)} == {}, name
+
+
+def test_a_spent_sitting_leaves_the_rest_for_the_next(tmp_path, caplog):
+    exp = _write(tmp_path, {"prior": {"task": "flat", "iterations": 1}, "spec": {"init": "prior", "iterations": 1}})
+    code, errors = _experiment([f"experiment={exp}", f"root={tmp_path / 'exps'}", "max_minutes=0.00001"], caplog)
+    assert code == 0 and not errors
+    assert "ran nothing; left prior@0, spec@0" in _summary(caplog)
+    assert not (tmp_path / "exps/exp/runs").exists()

@@ -144,6 +144,21 @@ def test_bad_experiment_one_line_nothing_written(tmp_path, caplog, cells, extra,
     assert not (tmp_path / "exps").exists()
 
 
+@pytest.mark.parametrize(
+    "table, needle",
+    [
+        ({"methods": {"Ours": "a"}, "table1": {}}, "row 'Ours' must be a list"),
+        ({"methods": {"Ours": ["b"]}, "table1": {}}, "unknown cell 'b'"),
+        ({"methods": {"Ours": ["a"]}}, "needs table1: and/or table2:"),
+    ],
+)
+def test_bad_table_one_line_nothing_written(tmp_path, caplog, table, needle):
+    exp = _write(tmp_path, {"a": {"iterations": 1}}, {"t": table})
+    code, errors = _experiment([f"experiment={exp}", f"root={tmp_path / 'exps'}"], caplog)
+    assert code == 2 and len(errors) == 1 and needle in errors[0], errors
+    assert not (tmp_path / "exps").exists()
+
+
 def test_unknown_experiment_and_option(caplog):
     code, errors = _experiment(["experiment=nosuch"], caplog)
     assert code == 2 and len(errors) == 1 and "unknown experiment 'nosuch'" in errors[0] and "smoke" in errors[0]

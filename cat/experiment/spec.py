@@ -225,6 +225,12 @@ def _table(name: str, raw: dict) -> Table:
     _check_keys(what, raw, Table)
     if not isinstance(raw.get("methods"), dict) or not raw["methods"]:
         raise ExperimentError(f"{what}: needs methods: {{row: [cells or checkpoints]}}")
+    for row, entries in raw["methods"].items():
+        columns = entries.values() if isinstance(entries, dict) else [entries]
+        if not all(isinstance(c, list) and c and all(isinstance(e, str) for e in c) for c in columns):
+            raise ExperimentError(
+                f"{what}: row {row!r} must be a list of cells / checkpoints, or {{scene type: [...]}}, got {entries!r}"
+            )
     if raw.get("table1") is None and raw.get("table2") is None:
         raise ExperimentError(f"{what}: needs table1: and/or table2:")
     return Table(name=name, **raw)

@@ -36,6 +36,7 @@ setup(
         "tqdm>=4.66",
         "matplotlib>=3.8",
         "viser>=1.0",  # click demo web view (scene.on_click / on_pointer_event)
+        "fast-simplification>=0.1",  # trimesh's quadric decimation of the G1's visual meshes for the viewer
         "onnx>=1.16",  # scripts/export.py: one self-contained policy file with metadata
         "onnxruntime>=1.18",  # running an exported policy (click demo checkpoint=x.onnx), export parity check
     ],

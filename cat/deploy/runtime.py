@@ -96,6 +96,8 @@ class RobotView:
     qpos: np.ndarray
     geom_pos: np.ndarray  # (G, 3) robot collision geoms
     geom_quat: np.ndarray  # (G, 4) wxyz
+    body_pos: np.ndarray  # (B, 3) every body of the model (for the visual meshes)
+    body_quat: np.ndarray  # (B, 4) wxyz
     goal: np.ndarray | None
     link_pos: np.ndarray  # (13, 3) FK
     f_h: np.ndarray  # (13, 3) HumanoidPF at the links (zeros without a field)
@@ -413,6 +415,8 @@ class Runtime:
                 d.qpos.copy(),
                 d.geom_xpos[self.geom_ids].copy(),
                 quats,
+                d.xpos.copy(),
+                d.xquat.copy(),
                 goal,
                 self.state.link_pos[0].numpy().copy(),
                 self.f_h[0].numpy().copy(),

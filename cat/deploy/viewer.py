@@ -1,5 +1,5 @@
-"""The browser view (viser): scene, G1 collision geoms, goal, F_H arrows, the robot's map window; a click on
-the floor sends the robot there.
+"""The browser view (viser): scene, the G1 (its visual meshes, ``cat.deploy.robot_mesh``; its collision geoms when
+the model has none), goal, F_H arrows, the robot's map window; a click on the floor sends the robot there.
 
 Three threads: the runtime's control loop (50 Hz, real time), perception (10 Hz, in the runtime), and the
 render loop here (``render_hz``, default 30 Hz), which copies the robot's state under the runtime's lock and
@@ -21,6 +21,7 @@ import trimesh
 import viser
 
 from cat.deploy.perception import occupied_in_map
+from cat.deploy.robot_mesh import visual_meshes
 from cat.deploy.runtime import Runtime
 from cat.deploy.scenes import GoalError, floor_hit
 
@@ -38,6 +39,8 @@ class ViewerCfg:
     port: int = 8080
     render_hz: float = 30.0
     arrow_scale: float = 0.4  # metres of arrow per unit of F_H
+    robot_meshes: bool = True  # the G1's visual meshes (else its collision capsules)
+    mesh_keep: float = 0.1  # fraction of the visual meshes' triangles drawn (decimated once, cached)
 
 
 def _geom_mesh(model: mujoco.MjModel, g: int) -> trimesh.Trimesh:
@@ -96,23 +99,23 @@ class ClickApp:
             mesh.visual = trimesh.visual.ColorVisuals(mesh, face_colors=(190, 140, 90, 255))
             sc.add_mesh_trimesh("/scene", mesh)
         view = rt.view()
-        # robot: one batched mesh per distinct (type, size), instances follow the geoms
-        groups: dict[tuple, list[int]] = {}
-        for k, g in enumerate(rt.geom_ids):
-            key = (int(rt.model.geom_type[g]), *np.round(rt.model.geom_size[g], 5).tolist())
-            groups.setdefault(key, []).append(k)
-        self._robot = []
-        for n, idx in enumerate(groups.values()):
-            m = _geom_mesh(rt.model, rt.geom_ids[idx[0]])
-            handle = sc.add_batched_meshes_simple(
-                f"/robot/g{n}",
-                m.vertices,
-                m.faces,
-                batched_wxyzs=view.geom_quat[idx],
-                batched_positions=view.geom_pos[idx],
-                batched_colors=ROBOT_RGB,
+        self._robot, self._bodies = [], []
+        meshes = visual_meshes(rt.robot, self.cfg.mesh_keep) if self.cfg.robot_meshes else []
+        for bm in meshes:
+            b = mujoco.mj_name2id(rt.model, mujoco.mjtObj.mjOBJ_BODY, bm.body)
+            if b < 0:
+                continue
+            handle = sc.add_mesh_simple(
+                f"/robot/{bm.body}",
+                bm.mesh.vertices.astype(np.float32),
+                bm.mesh.faces.astype(np.uint32),
+                color=ROBOT_RGB,
+                position=tuple(view.body_pos[b]),
+                wxyz=tuple(view.body_quat[b]),
             )
-            self._robot.append((handle, np.array(idx)))
+            self._bodies.append((handle, b))
+        if not self._bodies:  # no visual meshes: one batched mesh per distinct collision (type, size)
+            self._add_collision_geoms(view)
         self._goal = sc.add_icosphere("/goal", radius=0.07, color=(240, 60, 60), visible=False)
         self._goal_pole = sc.add_line_segments(
             "/goal_pole", np.zeros((1, 2, 3)), colors=(240, 60, 60), thickness=0.01, visible=False
@@ -135,6 +138,24 @@ class ClickApp:
         cam.position = (float(start[0] - 1.2), float(start[1] - 2.4), 2.2)
         cam.look_at = (float(start[0] + 1.0), float(start[1]), 0.0)
         cam.up = (0.0, 0.0, 1.0)
+
+    def _add_collision_geoms(self, view) -> None:
+        rt, sc = self.rt, self.server.scene
+        groups: dict[tuple, list[int]] = {}
+        for k, g in enumerate(rt.geom_ids):
+            key = (int(rt.model.geom_type[g]), *np.round(rt.model.geom_size[g], 5).tolist())
+            groups.setdefault(key, []).append(k)
+        for n, idx in enumerate(groups.values()):
+            m = _geom_mesh(rt.model, rt.geom_ids[idx[0]])
+            handle = sc.add_batched_meshes_simple(
+                f"/robot/g{n}",
+                m.vertices,
+                m.faces,
+                batched_wxyzs=view.geom_quat[idx],
+                batched_positions=view.geom_pos[idx],
+                batched_colors=ROBOT_RGB,
+            )
+            self._robot.append((handle, np.array(idx)))
 
     def _arrow_points(self, view) -> np.ndarray:
         f_h = view.f_h * self.cfg.arrow_scale
@@ -190,6 +211,9 @@ class ClickApp:
             for handle, idx in self._robot:
                 handle.batched_positions = view.geom_pos[idx]
                 handle.batched_wxyzs = view.geom_quat[idx]
+            for handle, b in self._bodies:
+                handle.position = tuple(view.body_pos[b])
+                handle.wxyz = tuple(view.body_quat[b])
             if view.goal is not None:
                 self._goal.position = tuple(view.goal)
                 self._goal.visible = True

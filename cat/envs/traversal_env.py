@@ -125,6 +125,8 @@ class TraversalEnv(VecEnv):
         self.curriculum = None
         if scenes is not None and cfg.curriculum.enabled:
             self.curriculum = DifficultyCurriculum(scenes.difficulties, self.num_envs, cfg.curriculum)
+        if scenes is not None:
+            scenes.set_episodes(cfg.episodes)
         self.field_source = (
             scenes.field_source(self.device)
             if scenes is not None
@@ -437,7 +439,8 @@ class TraversalEnv(VecEnv):
         if self.scenes is not None:
             if self.curriculum is not None:
                 self.scenes.assign_scenes(env_ids, self.curriculum.pick_scenes(env_ids, g))
-            start, goal, heading = self.scenes.sample_episode(env_ids, g)
+            progress = self.curriculum.progress(env_ids) if self.curriculum is not None else None
+            start, goal, heading = self.scenes.sample_episode(env_ids, g, progress)
             start, goal, heading = start.to(dev), goal.to(dev), heading.to(dev)
         else:
             start = torch.zeros(k, 3, device=dev)

@@ -22,6 +22,7 @@ from cat.checkpoint_io import (  # noqa: F401  (re-exported: the checkpoint API 
     read_env_snapshot,
     resolve_checkpoint,
 )
+from cat.envs.episodes import check_episode_cfg
 from cat.envs.obs_groups import resolve_groups
 from cat.envs.sim import check_backend
 from cat.envs.traversal_env import TraversalEnv
@@ -39,11 +40,13 @@ from cat.learning.finetune import (
     is_student_checkpoint,
     load_student_as_actor,
 )
+from cat.learning.precision import check_mixed_precision
 from cat.learning.progress import BudgetReached, install_iteration_hook, quiet_constructor
 from cat.learning.rerun_writer import prune_metrics
 from cat.learning.run_config import load_run_config, resume_config, save_config  # noqa: F401  (re-exported)
 from cat.learning.warm_start import adapt_to_new_inputs
 from cat.terrain import TYPICAL_KINDS, kind_name
+from cat.terrain.data_groups import data_group
 
 log = logging.getLogger(__name__)
 
@@ -89,12 +92,13 @@ def make_env(cfg: TrainCfg, num_envs: int | None = None) -> TraversalEnv:
             per_world=cfg.sim.per_world_scenes,
             warmup=task.warmup_variants,
             mirror=task.mirror_scenes,
+            episodes=task.episodes,
         )
         if task.scene_groups and not task.scene_dir:
             scenes = SceneSet.typical(task.scene_groups, n, task.scene_variants, task.scene_seed, **kw)
         elif task.scene_dir:
             kw.pop("warmup")  # typical scenes only (validate_train_cfg refuses it with a scene_dir)
-            scenes = SceneSet.from_dir(task.scene_dir, num_envs=n, kind=task.scene_kind, **kw)
+            scenes = SceneSet.from_dir(task.scene_dir, num_envs=n, kind=task.scene_kind, data=task.data, **kw)
         else:
             scenes = SceneSet.typical(task.scene_kind, n, task.scene_variants, task.scene_seed, **kw)
     sim, fc = cfg.sim, cfg.sim.field_contact
@@ -163,6 +167,11 @@ def validate_train_cfg(cfg: TrainCfg) -> None:
             raise ValueError(f"task.scene_groups has {kind!r}; typical kinds: {', '.join(TYPICAL_KINDS)}")
     if cfg.task.warmup_variants < 0:
         raise ValueError(f"task.warmup_variants={cfg.task.warmup_variants}: must be >= 0")
+    if cfg.task.data is not None:
+        if not cfg.task.scene_dir:
+            raise ValueError(f"task.data={cfg.task.data!r} selects from a hybrid scene folder: set task.scene_dir")
+        data_group(cfg.task.data)  # unknown name -> DataGroupError (a ValueError) naming the valid ones
+    check_episode_cfg(cfg.task.episodes)
     if cfg.task.warmup_variants and cfg.task.scene_dir:
         raise ValueError("task.warmup_variants builds typical scenes: it cannot be used with task.scene_dir")
     if cfg.task.episode_length_s <= 0:
@@ -303,6 +312,7 @@ def train(cfg: TrainCfg) -> Path:
     cfg = for_this_rank(cfg)
     torch.manual_seed(cfg.seed)
     set_torch_threads(cfg.torch_threads)
+    check_mixed_precision(cfg.algo.mixed_precision, cfg.sim.device)
     env = make_env(cfg)  # before any folder exists: a bad scene or model leaves nothing behind
     if cfg.algo.name == "distill":
         check_teachers(load_specialists(list(cfg.teachers)), cfg, env.scene_group_names)

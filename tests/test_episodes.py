@@ -14,7 +14,7 @@ from cat.envs.episodes import EpisodeCfg, EpisodeError, EpisodeSampler
 from cat.envs.scene_set import SceneSet, SceneSetError, scene_fields
 from cat.envs.traversal_env import TraversalEnv
 from cat.eval.test_set import candidate
-from cat.terrain import Scene, make_indoor
+from cat.terrain import Scene, SceneError, make_indoor
 from cat.terrain.data_groups import DATA_GROUPS, DataGroupError, select
 from cat.terrain.dataset import GenScenesCfg, jobs
 
@@ -153,6 +153,11 @@ def test_scene_folder_errors_name_the_problem(tmp_path):
         SceneSet.from_dir(tmp_path / "missing", 4)
     with pytest.raises(SceneSetError, match="no scene folder"):
         SceneSet.from_dir(tmp_path, 4)
+    (tmp_path / "broken").mkdir()
+    (tmp_path / "broken" / "scene.json").write_text("{not json")
+    with pytest.raises(SceneError, match="broken/scene.json: invalid JSON"):
+        SceneSet.from_dir(tmp_path, 4)
+    (tmp_path / "broken" / "scene.json").unlink()
     hard = corridor_scene()
     hard.kind, hard.difficulty = "procedural", 0.9
     hard.save(tmp_path / "procedural" / "p")

@@ -12,7 +12,8 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from cat.terrain import GOAL_HEIGHT, TYPICAL_KINDS, Scene, SceneError, kind_name, make_typical
+from cat.envs.scene_source import typical_kind_or_none
+from cat.terrain import GOAL_HEIGHT, TYPICAL_KINDS, Scene, SceneError, make_typical
 from cat.terrain.scene import MESH_SUFFIXES, SCENE_FILE
 from cat.terrain.voxel import reachable_mask
 
@@ -34,8 +35,8 @@ def load_scene(spec: str, start_xy: tuple[float, float] | None = None, seed: int
     path = Path(spec)
     if spec == FLAT:
         scene = Scene(trimesh.Trimesh(), FLAT_BOUNDS, start=(0.0, 0.0), goals=[(2.0, 0.0)], kind=FLAT)
-    elif kind_name(spec) in TYPICAL_KINDS and not path.exists():
-        scene = make_typical(kind_name(spec), difficulty=0.5, seed=seed)
+    elif (kind := typical_kind_or_none(spec)) is not None and not path.exists():
+        scene = make_typical(kind, difficulty=0.5, seed=seed)
     elif path.is_dir():
         if not (path / SCENE_FILE).is_file():
             raise SceneError(f"{path}: not a scene folder (no {SCENE_FILE})")

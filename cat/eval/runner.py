@@ -25,11 +25,12 @@ import torch
 
 from cat.envs.config import EnvCfg, SuccessCfg, TerminationCfg
 from cat.envs.scene_set import SceneSet, SceneSetError, scene_fields
+from cat.envs.scene_source import SceneSource, eval_scene_source
 from cat.envs.traversal_env import TraversalEnv
 from cat.eval.metrics import TrialResult
 from cat.eval.trials import Trial
 from cat.fields import Field
-from cat.terrain import TYPICAL_KINDS, Scene, kind_name, typical_variants, warmup_variants
+from cat.terrain import Scene, typical_variants, warmup_variants
 
 log = logging.getLogger(__name__)
 
@@ -89,6 +90,28 @@ class SceneGroup:
         names = [str(f.relative_to(root)) for f in folders]
         return cls(name, scenes, names, [scene_fields(s, f, None) for s, f in zip(scenes, folders, strict=True)])
 
+    @classmethod
+    def of_source(cls, source: SceneSource) -> SceneGroup:
+        """The scenes of ``source`` (``cat.envs.scene_source``): a folder (only ``source.kind`` when set), or one
+        typical kind's paper variants, or with ``variants=0`` its warm-up variants."""
+        if source.scene_dir:
+            group = cls.from_dir("scenes", source.scene_dir)
+            if not source.kind:
+                return group
+            keep = [i for i, s in enumerate(group.scenes) if s.kind == source.kind]
+            if not keep:
+                raise SceneSetError(f"no scenes of kind {source.kind!r} under {source.scene_dir}")
+            pick = (
+                [group.scenes[i] for i in keep],
+                [group.scene_names[i] for i in keep],
+                [group.fields[i] for i in keep],
+            )
+            return SceneGroup(source.kind, *pick)
+        (kind,) = source.typical
+        if source.variants == 0:
+            return cls.warmup(kind, source.warmup, source.seed)
+        return cls.typical(kind, source.variants, source.seed)
+
     def mirrored(self) -> SceneGroup:
         """The group's scenes reflected left/right (``Scene.mirrored``), their fields built anew."""
         scenes = [s.mirrored() for s in self.scenes]
@@ -103,49 +126,9 @@ def run_scene_group(
     task: EnvCfg, scene_seed: int | None = None, scene_dir: str = "", scene_kind: str = "", warmup: bool = False
 ) -> SceneGroup | None:
     """The scenes a run trained on (``None``: flat ground), unless ``scene_seed`` / ``scene_dir`` /
-    ``scene_kind`` override them.
-
-    Typical tasks rebuild their variants from ``task.scene_seed`` (not the RL seed); dataset tasks read
-    ``task.scene_dir`` filtered to ``task.scene_kind``. A run over several typical groups (a generalist's
-    ``task.scene_groups``) is evaluated one group at a time: ``scene_kind`` names it. ``warmup``: the kind's
-    ``task.warmup_variants`` training-only warm-up scenes instead of the paper's variants (typical kinds only).
-    """
-    if warmup and (scene_dir or task.scene_dir):
-        raise ValueError("warmup=true evaluates a typical kind's warm-up scenes; it cannot read scene_dir scenes")
-    if scene_kind:
-        kind = kind_name(scene_kind)
-        if kind not in TYPICAL_KINDS:
-            raise ValueError(f"scene_kind={scene_kind!r} is not a typical kind; valid: {', '.join(TYPICAL_KINDS)}")
-        task = copy.copy(task)
-        task.scene_kind, task.scene_groups = kind, []
-    elif task.scene_groups and not (scene_dir or task.scene_dir):
-        raise ValueError(
-            f"the run trained on several scene groups {list(task.scene_groups)}: evaluate one at a time "
-            f"with scene_kind=<group>"
-        )
-    if scene_dir or task.scene_dir:
-        group = SceneGroup.from_dir("scenes", scene_dir or task.scene_dir)
-        if task.scene_kind and not scene_dir:
-            keep = [i for i, s in enumerate(group.scenes) if s.kind == task.scene_kind]
-            if not keep:
-                raise SceneSetError(f"no scenes of kind {task.scene_kind!r} under {task.scene_dir}")
-            pick = (
-                [group.scenes[i] for i in keep],
-                [group.scene_names[i] for i in keep],
-                [group.fields[i] for i in keep],
-            )
-            group = SceneGroup(task.scene_kind, *pick)
-        return group
-    if task.scene_kind:
-        seed = task.scene_seed if scene_seed is None else scene_seed
-        if warmup:
-            if task.warmup_variants < 1:
-                raise ValueError(f"warmup=true: the run's task {task.scene_kind!r} has no warm-up scenes")
-            return SceneGroup.warmup(task.scene_kind, task.warmup_variants, seed)
-        return SceneGroup.typical(task.scene_kind, task.scene_variants, seed)
-    if warmup:
-        raise ValueError("warmup=true needs a typical scene kind; this run trained on flat ground")
-    return None
+    ``scene_kind`` override them; chosen and checked by ``cat.envs.scene_source.eval_scene_source``."""
+    source = eval_scene_source(task, scene_seed, scene_dir, scene_kind, warmup)
+    return None if source is None else SceneGroup.of_source(source)
 
 
 def eval_task(task: EnvCfg, num_envs: int, cfg: EvalCfg) -> EnvCfg:

@@ -49,7 +49,7 @@ def resume_config(checkpoint: str | os.PathLike, overrides: list[str]) -> TrainC
     dotlist = []
     for item in overrides:
         key, value = item.split("=", 1)
-        if key in ("task", "sim", "algo", "field", "method"):
+        if key in ("task", "sim", "algo", "method"):
             if key == "task" and value != base.task.task:
                 raise ValueError(f"resume={checkpoint} continues task {base.task.task!r}; drop task={value}")
             if key == "method" and value != base.method:

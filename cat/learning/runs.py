@@ -22,8 +22,8 @@ from cat.checkpoint_io import (  # noqa: F401  (re-exported: the checkpoint API 
     read_env_snapshot,
     resolve_checkpoint,
 )
-from cat.envs.episodes import check_episode_cfg
 from cat.envs.obs_groups import resolve_groups
+from cat.envs.scene_source import check_scene_task, scene_set_for
 from cat.envs.sim import check_backend
 from cat.envs.traversal_env import TraversalEnv
 from cat.learning.config import ALGOS, TrainCfg, check_obs_groups, policy_model, runner_cfg, student_model_cfg
@@ -45,8 +45,6 @@ from cat.learning.progress import BudgetReached, install_iteration_hook, quiet_c
 from cat.learning.rerun_writer import prune_metrics
 from cat.learning.run_config import load_run_config, resume_config, save_config  # noqa: F401  (re-exported)
 from cat.learning.warm_start import adapt_to_new_inputs
-from cat.terrain import TYPICAL_KINDS, kind_name
-from cat.terrain.data_groups import data_group
 
 log = logging.getLogger(__name__)
 
@@ -83,24 +81,7 @@ def make_env(cfg: TrainCfg, num_envs: int | None = None) -> TraversalEnv:
     """The env of a run config (``num_envs`` overrides both the task's and the run's)."""
     n = num_envs or cfg.num_envs or cfg.task.num_envs
     task = replace(cfg.task, num_envs=n)
-    scenes = None
-    if task.scene_dir or task.scene_kind or task.scene_groups:
-        from cat.envs.scene_set import SceneSet
-
-        kw = dict(
-            device=cfg.sim.device,
-            per_world=cfg.sim.per_world_scenes,
-            warmup=task.warmup_variants,
-            mirror=task.mirror_scenes,
-            episodes=task.episodes,
-        )
-        if task.scene_groups and not task.scene_dir:
-            scenes = SceneSet.typical(task.scene_groups, n, task.scene_variants, task.scene_seed, **kw)
-        elif task.scene_dir:
-            kw.pop("warmup")  # typical scenes only (validate_train_cfg refuses it with a scene_dir)
-            scenes = SceneSet.from_dir(task.scene_dir, num_envs=n, kind=task.scene_kind, data=task.data, **kw)
-        else:
-            scenes = SceneSet.typical(task.scene_kind, n, task.scene_variants, task.scene_seed, **kw)
+    scenes = scene_set_for(task, n, cfg.sim.device, cfg.sim.per_world_scenes)  # cat.envs.scene_source
     sim, fc = cfg.sim, cfg.sim.field_contact
     return TraversalEnv(
         task, sim.backend, sim.device, scenes=scenes, seed=cfg.seed, obstacles=sim.obstacles, field_contact=fc
@@ -152,28 +133,7 @@ def validate_train_cfg(cfg: TrainCfg) -> None:
     for key, value in nonnegative.items():
         if value < 0:
             raise ValueError(f"{key}={value}: must be >= 0 (0 = off / default)")
-    if cfg.task.scene_kind:
-        cfg.task.scene_kind = kind_name(cfg.task.scene_kind)
-        if not cfg.task.scene_dir and cfg.task.scene_kind not in TYPICAL_KINDS:
-            raise ValueError(
-                f"task.scene_kind={cfg.task.scene_kind!r} without task.scene_dir must be a typical kind: "
-                f"{', '.join(TYPICAL_KINDS)}"
-            )
-    cfg.task.scene_groups = [kind_name(k) for k in cfg.task.scene_groups]
-    for kind in cfg.task.scene_groups:
-        if cfg.task.scene_dir:
-            raise ValueError("task.scene_groups builds typical scenes: it cannot be used with task.scene_dir")
-        if kind not in TYPICAL_KINDS:
-            raise ValueError(f"task.scene_groups has {kind!r}; typical kinds: {', '.join(TYPICAL_KINDS)}")
-    if cfg.task.warmup_variants < 0:
-        raise ValueError(f"task.warmup_variants={cfg.task.warmup_variants}: must be >= 0")
-    if cfg.task.data is not None:
-        if not cfg.task.scene_dir:
-            raise ValueError(f"task.data={cfg.task.data!r} selects from a hybrid scene folder: set task.scene_dir")
-        data_group(cfg.task.data)  # unknown name -> DataGroupError (a ValueError) naming the valid ones
-    check_episode_cfg(cfg.task.episodes)
-    if cfg.task.warmup_variants and cfg.task.scene_dir:
-        raise ValueError("task.warmup_variants builds typical scenes: it cannot be used with task.scene_dir")
+    cfg.task.scene_kind, cfg.task.scene_groups = check_scene_task(cfg.task)  # canonical kind names
     if cfg.task.episode_length_s <= 0:
         raise ValueError(f"task.episode_length_s={cfg.task.episode_length_s}: must be > 0")
     if cfg.algo.critic_warmup_iterations > 0 and cfg.algo.critic_warmup_learning_rate <= 0:

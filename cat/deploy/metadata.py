@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from cat.envs.config import EnvCfg
+from cat.envs.mdp.registry import OBS_TERMS
 from cat.envs.obs_groups import resolve_groups
 from cat.envs.perception import map_shape, voxel_shape
 from cat.envs.robot import RobotCfg
@@ -91,7 +92,9 @@ _TERMS = {
 
 def term_info(name: str, task: EnvCfg, robot: RobotCfg, size: int | None = None) -> TermInfo:
     """A term's layout from the task and robot (``size`` given: measured, e.g. by the runtime)."""
-    size_fn, clip_fn, note = _TERMS.get(name, (lambda t, r: None, None, "unknown to this version"))
+    reg = OBS_TERMS.get(name)  # a term registered outside the package (cat.envs.mdp.registry)
+    unknown = (reg.size, None, reg.note) if reg is not None else (lambda t, r: None, None, "unknown to this version")
+    size_fn, clip_fn, note = _TERMS.get(name, unknown)
     return TermInfo(
         name, size if size is not None else size_fn(task, robot), 1.0, clip_fn(task) if clip_fn else None, note
     )

@@ -206,6 +206,8 @@ class RewardCfg:
     collision: float = -5.0  # per control step with robot-obstacle contact at any substep
     termination: float = -20.0
     params: RewardParamsCfg = field(default_factory=RewardParamsCfg)
+    # weights of reward terms registered outside the package (cat.envs.mdp.registry.register_reward); docs/extending.md
+    extra: dict[str, float] = field(default_factory=dict)
 
 
 @dataclass

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import copy
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING
 
 import torch
@@ -23,6 +23,7 @@ from tensordict import TensorDict
 
 from cat.envs.config import PRIVILEGED_TERMS, EnvCfg, ObsGroupCfg
 from cat.envs.mdp import observations as obs_terms
+from cat.envs.mdp.registry import OBS_TERMS
 
 if TYPE_CHECKING:
     from cat.envs.traversal_env import TraversalEnv
@@ -33,12 +34,22 @@ FLIP_NOISE_TERMS = frozenset({"voxel_grid"})  # occupancy in {0, 1}: noise flips
 SHARED_NOISE = {"field_block_odometry": "field_block"}
 
 
-def lookup_term(module, name: str, kind: str) -> Callable:
-    """A term function of ``module`` by name, or ``ValueError`` naming it and listing the valid names."""
+def lookup_term(module, name: str, kind: str, registered: Mapping[str, Callable] | None = None) -> Callable:
+    """A term function of ``module`` (or of ``registered``: name -> function, terms added outside the package) by
+    name, or ``ValueError`` naming it and listing the valid names."""
+    if registered and name in registered:
+        return registered[name]
     fn = getattr(module, name, None)
     if fn is None or name.startswith("_") or not callable(fn) or getattr(fn, "__module__", "") != module.__name__:
-        raise ValueError(f"unknown {kind} term {name!r}; valid: {', '.join(term_names(module))}")
+        valid = term_names(module) + sorted(registered or ())
+        raise ValueError(f"unknown {kind} term {name!r}; valid: {', '.join(valid)}")
     return fn
+
+
+def observation_fns(module=obs_terms) -> dict[str, Callable]:
+    """Observation terms registered outside the package (``cat.envs.mdp.registry``), when ``module`` is the
+    built-in one."""
+    return {k: t.fn for k, t in OBS_TERMS.items()} if module is obs_terms else {}
 
 
 def term_names(module) -> list[str]:
@@ -91,7 +102,7 @@ class ObservationGroups:
         self.groups = resolve_groups(cfg.observations)
         self.noisy = {name: bool(g.noise) for name, g in cfg.observations.items()}
         names = dict.fromkeys(t for terms in self.groups.values() for t in terms)
-        self.fns = {t: lookup_term(module, t, "observation") for t in names}
+        self.fns = {t: lookup_term(module, t, "observation", observation_fns(module)) for t in names}
         self.history = {name: int(g.history) for name, g in cfg.observations.items()}
         for name, h in self.history.items():
             if h < 1:

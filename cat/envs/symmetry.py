@@ -24,6 +24,7 @@ import numpy as np
 import torch
 from tensordict import TensorDict
 
+from cat.envs.mdp.registry import OBS_TERMS
 from cat.envs.perception import map_shape, voxel_shape
 
 if TYPE_CHECKING:
@@ -94,8 +95,14 @@ def term_mirror(env: TraversalEnv, term: str) -> tuple[list[int], list[float]]:
         "overhead_map": grid_mirror(map_shape(env.cfg.perception.height_map)),
         "voxel_grid": grid_mirror(voxel_shape(env.cfg.perception.voxel_grid)),
     }
+    registered = OBS_TERMS.get(term)
+    if registered is not None and registered.mirror is not None:
+        return registered.mirror
     if term not in table:
-        raise ValueError(f"observation term {term!r} has no mirror map; add one in cat.envs.symmetry.term_mirror")
+        raise ValueError(
+            f"observation term {term!r} has no mirror map; add one in cat.envs.symmetry.term_mirror "
+            "(or register_observation(..., mirror=...))"
+        )
     return table[term]
 
 

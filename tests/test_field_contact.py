@@ -47,12 +47,8 @@ def wall_env(obstacles: str, faces=(FACE_X,), sim: str = "mujoco", per_world: bo
 
 
 def body_points(fc: FieldContact, sens: torch.Tensor) -> torch.Tensor:
-    """(n, B, K, 3) world positions of every sample point."""
-    from cat.envs.field_contact import _quat_rotate
-
-    pos, quat = fc.poses(sens)
-    k = fc.points.shape[1]
-    return pos[:, :, None] + _quat_rotate(quat[:, :, None].expand(-1, -1, k, 4), fc.points.expand(len(pos), -1, -1, -1))
+    """(n, P, 3) world positions of every sample point."""
+    return fc.world_points(*fc.poses(sens))
 
 
 def pose_at(env: TraversalEnv, x: float) -> None:
@@ -67,7 +63,7 @@ def pose_at(env: TraversalEnv, x: float) -> None:
 def front_offset(env: TraversalEnv) -> float:
     """x of the robot's frontmost collision-surface sample relative to its root, in the home pose."""
     pose_at(env, 0.0)
-    return float(body_points(env.field_contact, env.sim.sensordata.float())[0].reshape(-1, 3)[:, 0].max())
+    return float(body_points(env.field_contact, env.sim.sensordata.float())[0, :, 0].max())
 
 
 @pytest.mark.parametrize("gtype,size", [(G.mjGEOM_SPHERE, (0.07, 0, 0)), (G.mjGEOM_CAPSULE, (0.045, 0.075, 0)),
@@ -113,7 +109,7 @@ def test_pose_two_cm_inside_a_wall_is_contact_and_one_cm_clear_is_not():
         for env in (field, physical):
             pose_at(env, x)
             assert bool(env.state.collision[0]) is expect, (env.obstacles, depth)
-        sdf = body_points(field.field_contact, field.sim.sensordata.float())[0, ..., 0].max()
+        sdf = body_points(field.field_contact, field.sim.sensordata.float())[0, :, 0].max()
         assert abs(float(sdf) - (FACE_X + depth)) < 1e-4  # the pose is what the test says
     assert field.sim.model.ngeom < physical.sim.model.ngeom  # the field world holds no wall
 

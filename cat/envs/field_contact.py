@@ -9,8 +9,8 @@ frame; each step the body poses come from MuJoCo frame sensors (``add_body_pose_
 compute them inside the simulator.
 
 Points outside their scene's field grid count as free (no obstacle is known there). To keep the query cheap,
-each body is first tested at the centre of a sphere bounding its points: bodies whose centre lies farther than
-the sphere's radius + margin + ``CULL_SLACK`` from every obstacle are not queried point by point.
+each collision geom is first tested at the centre of a sphere bounding its points: geoms whose centre lies farther
+than the sphere's radius + margin + ``CULL_SLACK`` from every obstacle are not queried point by point.
 
 The judgement is an instant (the sensor time of the control step); physical contact is a max over the physics
 substeps. The margin and spacing, and the agreement measured against physical contact, are in docs/training.md
@@ -41,7 +41,7 @@ OBSTACLE_MODES = ("physical", "field")
 """``sim.obstacles``: obstacle geometry in the physics worlds (``physical``) or only as SDF (``field``)."""
 POSE_SENSOR_PREFIX = "field_contact_pose_"
 CULL_SLACK = 0.06
-"""m: extra distance before a body's bounding sphere is considered clear (the interpolated SDF of a 4 cm voxel
+"""m: extra distance before a geom's bounding sphere is considered clear (the interpolated SDF of a 4 cm voxel
 grid is not exactly 1-Lipschitz; tests check culling never changes the judgement)."""
 
 
@@ -139,6 +139,19 @@ def _quat_rotate(q: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
     return v + w * t + torch.cross(xyz, t, dim=-1)
 
 
+def _quat_matrix(q: torch.Tensor) -> torch.Tensor:
+    """Rotation matrices (..., 3, 3) of unit quaternions (..., 4) (w, x, y, z)."""
+    w, x, y, z = q.unbind(-1)
+    return torch.stack(
+        (
+            1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
+            2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+            2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
+        ),
+        dim=-1,
+    ).view(*q.shape[:-1], 3, 3)  # fmt: skip
+
+
 def _quat_np(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     return _quat_rotate(torch.tensor(q, dtype=torch.float64), torch.tensor(v, dtype=torch.float64)).numpy()
 
@@ -147,8 +160,8 @@ def _quat_np(q: np.ndarray, v: np.ndarray) -> np.ndarray:
 class FieldContact:
     """Contact of each robot body with the obstacles of each env's scene, judged from the field bank's SDF.
 
-    ``bodies`` are the robot bodies with collision geoms; ``points[b]`` their surface samples in the body frame
-    (padded to one length by repeating a point). ``ghost_parts`` bodies are judged but do not count as hard
+    ``bodies`` are the robot bodies with collision geoms; ``geom_points[g]`` the surface samples of collision geom
+    ``g`` in its body's frame (body ``geom_body[g]``). ``ghost_parts`` bodies are judged but do not count as hard
     contacts; with ``ghost_obstacles`` no contact is hard (the physical mode's training aids, same meaning).
     """
 
@@ -167,22 +180,20 @@ class FieldContact:
         geoms = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, g) for g in robot.collision_geoms]
         body_ids = list(dict.fromkeys(int(model.geom_bodyid[g]) for g in geoms))
         self.bodies = [model.body(b).name for b in body_ids]
-        per_body: list[list[np.ndarray]] = [[] for _ in body_ids]
+        f32 = dict(dtype=torch.float32, device=self.device)
+        pts, centres, radii = [], [], []
         for g in geoms:
             local = geom_surface_points(int(model.geom_type[g]), model.geom_size[g], cfg.spacing)
-            in_body = model.geom_pos[g] + _quat_np(np.broadcast_to(model.geom_quat[g], (len(local), 4)), local)
-            per_body[body_ids.index(int(model.geom_bodyid[g]))].append(in_body)
-        pts = [np.concatenate(p) for p in per_body]
+            p = model.geom_pos[g] + _quat_np(np.broadcast_to(model.geom_quat[g], (len(local), 4)), local)
+            c = 0.5 * (p.min(0) + p.max(0))
+            pts.append(torch.tensor(p, **f32))
+            centres.append(c)
+            radii.append(float(np.linalg.norm(p - c, axis=1).max()))
+        self.geom_points = pts  # per geom (K_g, 3), body frame
+        self.geom_body = torch.tensor([body_ids.index(int(model.geom_bodyid[g])) for g in geoms], device=self.device)
+        self.geom_centre = torch.tensor(np.array(centres), **f32)  # (G, 3) bounding-sphere centres, body frame
+        self.geom_radius = torch.tensor(radii, **f32)  # (G,)
         self.num_points = sum(len(p) for p in pts)
-        k = max(len(p) for p in pts)
-        padded = np.stack([np.concatenate([p, np.repeat(p[:1], k - len(p), axis=0)]) for p in pts])
-        lo, hi = np.stack([p.min(0) for p in pts]), np.stack([p.max(0) for p in pts])
-        centre = 0.5 * (lo + hi)
-        f32 = dict(dtype=torch.float32, device=self.device)
-        self.points = torch.tensor(padded, **f32)  # (B, K, 3) body frame
-        self.centre = torch.tensor(centre, **f32)  # (B, 3) bounding-sphere centres, body frame
-        radius = [np.linalg.norm(p - c, axis=1).max() for p, c in zip(pts, centre, strict=True)]
-        self.radius = torch.tensor(radius, **f32)
         unknown = sorted(set(ghost_parts) - set(self.bodies))
         if unknown:
             raise ValueError(f"ghost_parts {unknown} have no collision geom; robot bodies that do: {self.bodies}")
@@ -213,23 +224,45 @@ class FieldContact:
         out = torch.full((n, nb), math.inf, device=self.device)
         if n == 0:
             return out
-        idx = field_idx.to(self.device).long()
-        if self.cull:
-            centre = pos + _quat_rotate(quat, self.centre.expand(n, nb, 3))
+        idx, gb = field_idx.to(self.device).long(), self.geom_body
+        rot = _quat_matrix(quat)  # (n, B, 3, 3)
+        if self.cull:  # geoms whose bounding sphere is clear of every obstacle are not queried point by point
+            centre = pos[:, gb] + (rot[:, gb] @ self.geom_centre[:, :, None]).squeeze(-1)
             s = bank.query(idx, centre)
             d = torch.where(s.inside, s.sdf.to(self.device), self._outside_gap(bank, idx, centre))
-            pairs = (d < self.radius + self.cfg.margin + CULL_SLACK).nonzero()
+            near = d < self.geom_radius + self.cfg.margin + CULL_SLACK  # (n, G)
         else:
-            pairs = torch.cartesian_prod(torch.arange(n, device=self.device), torch.arange(nb, device=self.device))
-        if len(pairs) == 0:
+            near = torch.ones(n, len(gb), dtype=torch.bool, device=self.device)
+        points, fields, parts = [], [], []
+        for g, local in enumerate(self.geom_points):
+            e = near[:, g].nonzero().squeeze(1)
+            if len(e) == 0:
+                continue
+            b = int(gb[g])
+            points.append((pos[e, b, None] + local @ rot[e, b].transpose(-1, -2)).reshape(-1, 3))
+            fields.append(idx[e].repeat_interleave(len(local)))
+            parts.append((b, e, len(local)))
+        if not parts:
             return out
-        e, b = pairs[:, 0], pairs[:, 1]
-        k = self.points.shape[1]
-        world = pos[e, b][:, None] + _quat_rotate(quat[e, b][:, None].expand(-1, k, 4), self.points[b])
-        s = bank.query(idx[e], world)
-        sdf = torch.where(s.inside, s.sdf, torch.full_like(s.sdf, math.inf)).to(self.device)
-        out[e, b] = sdf.amin(dim=1)
+        s = bank.query(torch.cat(fields), torch.cat(points)[:, None])
+        sdf = torch.where(s.inside, s.sdf, torch.full_like(s.sdf, math.inf)).to(self.device)[:, 0]
+        start = 0
+        for b, e, k in parts:
+            m = sdf[start : start + len(e) * k].view(len(e), k).amin(dim=1)
+            out[e, b] = torch.minimum(out[e, b], m)
+            start += len(e) * k
         return out
+
+    def world_points(self, pos: torch.Tensor, quat: torch.Tensor) -> torch.Tensor:
+        """(n, P, 3) every sample point in the world frame (all geoms in order; diagnostics and tests)."""
+        rot = _quat_matrix(quat)
+        return torch.cat(
+            [
+                pos[:, int(b), None] + p @ rot[:, int(b)].transpose(-1, -2)
+                for p, b in zip(self.geom_points, self.geom_body, strict=True)
+            ],
+            dim=1,
+        )
 
     @staticmethod
     def _outside_gap(bank, idx: torch.Tensor, p: torch.Tensor) -> torch.Tensor:

@@ -80,6 +80,15 @@ def test_a_scene_folder_by_kind_and_data_group(tmp_path):
     assert group.name == "procedural" and group.scene_names == ["procedural/b"]
 
 
+def test_a_folder_of_links_plays_as_it_trains(tmp_path):
+    _save(tmp_path / "real" / "a", "indoor", 0.2)
+    (tmp_path / "links").mkdir()
+    (tmp_path / "links" / "a").symlink_to(tmp_path / "real" / "a")
+    task = _task(scene_dir=str(tmp_path / "links"))
+    assert [s.kind for s in scene_set_for(task, 1).scenes] == ["indoor"]
+    assert run_scene_group(task).scene_names == ["a"]
+
+
 @pytest.mark.parametrize(
     "kw, match",
     [

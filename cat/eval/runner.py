@@ -24,7 +24,7 @@ from pathlib import Path
 import torch
 
 from cat.envs.config import EnvCfg, SuccessCfg, TerminationCfg
-from cat.envs.scene_set import SceneSet, SceneSetError, scene_fields
+from cat.envs.scene_set import SceneSet, SceneSetError, scene_fields, scene_folders
 from cat.envs.scene_source import SceneSource, eval_scene_source
 from cat.envs.traversal_env import TraversalEnv
 from cat.eval.metrics import TrialResult
@@ -83,7 +83,7 @@ class SceneGroup:
         root = Path(path)
         if not root.is_dir():
             raise SceneSetError(f"scene folder not found: {root}")
-        folders = sorted(p.parent for p in root.rglob("scene.json"))
+        folders = scene_folders(root)  # symbolic links followed, as training reads a folder (a folder of links)
         if not folders:
             raise SceneSetError(f"no scenes (scene.json) under {root}")
         scenes = [Scene.load(f) for f in folders]

@@ -29,7 +29,7 @@ from cat.envs.mdp import terminations as term_terms
 from cat.envs.mdp.actions import apply_actions, soft_joint_limits
 from cat.envs.mdp.commands import command_source, velocity_command
 from cat.envs.mdp.field_obs import field_obs
-from cat.envs.mdp.registry import active_rewards
+from cat.envs.mdp.registry import active_rewards, reward_fn
 from cat.envs.obs_groups import ObservationGroups, lookup_term
 from cat.envs.odometry import OdometryDrift
 from cat.envs.perception import ScenePerception
@@ -177,8 +177,8 @@ class TraversalEnv(VecEnv):
         if noise.enabled and self.cfg.field_obs.enabled and self.observation_groups.uses("field_block_odometry"):
             self.odometry = OdometryDrift(n, noise.odometry_xy, noise.odometry_yaw, dev)
             self.field_obs_odom_buf = torch.zeros(n, k, 7, **f32)
-        self.reward_terms = active_rewards(self.cfg.rewards)  # name -> (function, weight); registered ones last
-        self.reward_names = list(self.reward_terms)
+        self.reward_weights = active_rewards(self.cfg.rewards)  # name -> weight; registered terms last
+        self.reward_names = list(self.reward_weights)
         self.obs_groups = self.observation_groups.groups  # group name -> terms, in order (symmetry, layouts)
         self._mirror_map = None
         for t in self.cfg.terminations.terms:
@@ -350,8 +350,8 @@ class TraversalEnv(VecEnv):
 
         # rewards
         reward = torch.zeros(self.num_envs, device=self.device)
-        for name, (fn, weight) in self.reward_terms.items():
-            value = fn(self) * weight
+        for name, weight in self.reward_weights.items():
+            value = reward_fn(name)(self) * weight
             value = torch.nan_to_num(value, nan=0.0, posinf=0.0, neginf=0.0)
             self.episode_sums[name] += value
             reward += value

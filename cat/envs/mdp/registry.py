@@ -88,18 +88,20 @@ def _reward_weights():
     return [f for f in fields(RewardCfg) if f.type == "float"]
 
 
-def active_rewards(cfg: RewardCfg) -> dict[str, tuple[TermFn, float]]:
-    """Name -> (function, weight) of every reward term with a non-zero weight: the built-in ones in
-    ``RewardCfg``'s field order, then ``cfg.extra`` (registered terms) in its order."""
-    out = {
-        f.name: (getattr(reward_module, f.name), float(getattr(cfg, f.name)))
-        for f in _reward_weights()
-        if getattr(cfg, f.name) != 0.0
-    }
+def active_rewards(cfg: RewardCfg) -> dict[str, float]:
+    """Name -> weight of every reward term with a non-zero weight: the built-in ones in ``RewardCfg``'s field
+    order, then ``cfg.extra`` (registered terms) in its order."""
+    out = {f.name: float(getattr(cfg, f.name)) for f in _reward_weights() if getattr(cfg, f.name) != 0.0}
     for name, weight in cfg.extra.items():
         if name not in REWARD_TERMS:
             valid = ", ".join(sorted(REWARD_TERMS)) or "none registered"
             raise ValueError(f"task.rewards.extra names unknown reward term {name!r}; registered: {valid}")
         if weight != 0.0:
-            out[name] = (REWARD_TERMS[name], float(weight))
+            out[name] = float(weight)
     return out
+
+
+def reward_fn(name: str) -> TermFn:
+    """The function of reward term ``name``, looked up when called (the soak benchmark wraps the module's)."""
+    fn = REWARD_TERMS.get(name)
+    return fn if fn is not None else getattr(reward_module, name)

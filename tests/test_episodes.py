@@ -177,3 +177,12 @@ def test_unseen_test_scenes_are_never_in_a_training_group():
     test = [candidate(s, 4) for s in range(3)]
     assert all(_mesh_hash(t) not in train for t in test if t is not None)
     assert all(t.meta.get("test_stream") == 1 for t in test if t is not None)
+
+
+def test_evaluation_never_samples_free_episodes():
+    """Trials place start and goal themselves: a free-episode run is evaluated with the scenes' own sampling off."""
+    from cat.eval.runner import EvalCfg, eval_task
+
+    task = EnvCfg(num_envs=4, episodes=EpisodeCfg(mode="free", goal_distance=(5.0, 6.0)))
+    assert eval_task(task, 4, EvalCfg()).episodes.mode == "scene"
+    assert task.episodes.mode == "free"  # the run's config is not changed

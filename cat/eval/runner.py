@@ -24,6 +24,7 @@ from pathlib import Path
 import torch
 
 from cat.envs.config import EnvCfg, SuccessCfg, TerminationCfg
+from cat.envs.episodes import EpisodeCfg
 from cat.envs.scene_set import SceneSet, SceneSetError, scene_fields, scene_folders
 from cat.envs.scene_source import SceneSource, eval_scene_source
 from cat.envs.traversal_env import TraversalEnv
@@ -139,6 +140,7 @@ def eval_task(task: EnvCfg, num_envs: int, cfg: EvalCfg) -> EnvCfg:
     t.domain_rand.enabled = cfg.domain_rand
     t.push.enabled = cfg.push
     t.curriculum.enabled = False
+    t.episodes = EpisodeCfg()  # trials place start and goal themselves: no free-episode sampling to build
     t.ghost_obstacles, t.ghost_parts, t.ghost_parts_physical = False, [], 0.0  # training aids: trials are physical
     t.success = copy.deepcopy(cfg.success)
     t.terminations.min_base_height = cfg.fall.min_base_height

@@ -18,6 +18,15 @@ from cat.learning.hydra_cfg import load_config
 from cat.learning.runs import make_env, set_torch_threads
 
 
+def ppo_rate(env, cfg, iterations: int) -> float:
+    """Env steps/s of ``iterations`` PPO iterations (rollout + update) on ``env``, after one warm-up iteration."""
+    runner = OnPolicyRunner(env, runner_cfg(cfg.algo), log_dir=None, device=str(env.device))
+    runner.learn(1, init_at_random_ep_len=True)  # warm-up
+    start = time.perf_counter()
+    runner.learn(iterations)
+    return iterations * cfg.algo.num_steps_per_env * env.num_envs / (time.perf_counter() - start)
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="bench.py train", description=__doc__)
     parser.add_argument("--num-envs", type=int, default=1024)
@@ -29,11 +38,6 @@ def main(argv: list[str] | None = None) -> None:
     cfg = load_config(["task=flat", f"num_envs={args.num_envs}", *args.overrides])
     set_torch_threads(cfg.torch_threads)
     env = make_env(cfg)
-    runner = OnPolicyRunner(env, runner_cfg(cfg.algo), log_dir=None, device=str(env.device))
-    runner.learn(1, init_at_random_ep_len=True)  # warm-up
-    start = time.perf_counter()
-    runner.learn(args.iterations)
-    elapsed = time.perf_counter() - start
-    x = args.iterations * cfg.algo.num_steps_per_env * env.num_envs / elapsed
+    x = ppo_rate(env, cfg, args.iterations)
     y = raw_rate(env.sim.model, env.num_envs, env.robot.decimation, args.seconds)
     print(f"case=train num_envs={env.num_envs} env_steps_per_s={x:.0f} raw_env_steps_per_s={y:.0f} ratio={x / y:.2f}")

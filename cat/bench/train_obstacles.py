@@ -23,14 +23,14 @@ from pathlib import Path
 import mujoco
 import numpy as np
 from mujoco import rollout
-from rsl_rl.runners import OnPolicyRunner
 
+from cat.bench.train import ppo_rate
 from cat.envs.field_contact import OBSTACLE_MODES
 from cat.envs.robot import RobotCfg
 from cat.envs.scene import build_env_model
 from cat.envs.scene_set import SceneSet, scene_fields, scene_folders
 from cat.envs.traversal_env import TraversalEnv
-from cat.learning.config import TrainCfg, runner_cfg
+from cat.learning.config import TrainCfg
 from cat.learning.hydra_cfg import load_config
 from cat.learning.runs import set_torch_threads
 from cat.terrain import TYPICAL_KINDS, Scene, make_typical
@@ -112,12 +112,7 @@ def main(argv: list[str] | None = None) -> None:
     sim, fc = cfg.sim, cfg.sim.field_contact
     mode = sim.obstacles
     env = TraversalEnv(task, sim.backend, sim.device, scenes=sset, seed=cfg.seed, obstacles=mode, field_contact=fc)
-    runner = OnPolicyRunner(env, runner_cfg(cfg.algo), log_dir=None, device=str(env.device))
-    runner.learn(1, init_at_random_ep_len=True)  # warm-up
-    start = time.perf_counter()
-    runner.learn(args.iterations)
-    elapsed = time.perf_counter() - start
-    x = args.iterations * cfg.algo.num_steps_per_env * env.num_envs / elapsed
+    x = ppo_rate(env, cfg, args.iterations)
     y = raw_flat_rate(env.robot, env.num_envs, args.seconds, cfg.seed)
     print(
         f"case=train scenes={len(sset.scenes)} obstacles={env.obstacles} num_envs={env.num_envs} "

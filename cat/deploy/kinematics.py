@@ -16,7 +16,7 @@ import torch
 from pytorch_kinematics import frame as pk_frame
 from pytorch_kinematics import transforms as pk_tf
 
-from cat.envs.math_utils import quat_rotate_inverse
+from cat.envs.math_utils import quat_rotate_inverse, quat_to_matrix
 from cat.envs.robot import RobotCfg, compile_model, robot_spec
 from cat.envs.scene import strip_visual_meshes
 
@@ -76,19 +76,6 @@ def chain_from_model(model: mujoco.MjModel, root: str) -> pk.Chain:
     root_frame = pk_frame.Frame(root, pk_frame.Link(root), pk_frame.Joint(f"{root}_root", dtype=torch.float64))
     build(root_id, root_frame)
     return pk.Chain(root_frame, dtype=torch.float64)
-
-
-def quat_to_matrix(q: torch.Tensor) -> torch.Tensor:
-    """Rotation matrices (..., 3, 3) of unit quaternions (..., 4) in MuJoCo's (w, x, y, z) order."""
-    w, x, y, z = q.unbind(-1)
-    return torch.stack(
-        (
-            1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
-            2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
-            2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
-        ),
-        dim=-1,
-    ).reshape(*q.shape[:-1], 3, 3)  # fmt: skip
 
 
 @dataclass

@@ -29,6 +29,7 @@ import mujoco
 import numpy as np
 import torch
 
+from cat.envs.math_utils import quat_to_matrix
 from cat.envs.robot import RobotCfg
 from cat.envs.scene import build_env_model
 
@@ -139,19 +140,6 @@ def _quat_rotate(q: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
     return v + w * t + torch.cross(xyz, t, dim=-1)
 
 
-def _quat_matrix(q: torch.Tensor) -> torch.Tensor:
-    """Rotation matrices (..., 3, 3) of unit quaternions (..., 4) (w, x, y, z)."""
-    w, x, y, z = q.unbind(-1)
-    return torch.stack(
-        (
-            1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
-            2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
-            2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
-        ),
-        dim=-1,
-    ).view(*q.shape[:-1], 3, 3)  # fmt: skip
-
-
 def _quat_np(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     return _quat_rotate(torch.tensor(q, dtype=torch.float64), torch.tensor(v, dtype=torch.float64)).numpy()
 
@@ -225,7 +213,7 @@ class FieldContact:
         if n == 0:
             return out
         idx, gb = field_idx.to(self.device).long(), self.geom_body
-        rot = _quat_matrix(quat)  # (n, B, 3, 3)
+        rot = quat_to_matrix(quat)  # (n, B, 3, 3)
         if self.cull:  # geoms whose bounding sphere is clear of every obstacle are not queried point by point
             centre = pos[:, gb] + (rot[:, gb] @ self.geom_centre[:, :, None]).squeeze(-1)
             s = bank.query(idx, centre)
@@ -255,7 +243,7 @@ class FieldContact:
 
     def world_points(self, pos: torch.Tensor, quat: torch.Tensor) -> torch.Tensor:
         """(n, P, 3) every sample point in the world frame (all geoms in order; diagnostics and tests)."""
-        rot = _quat_matrix(quat)
+        rot = quat_to_matrix(quat)
         return torch.cat(
             [
                 pos[:, int(b), None] + p @ rot[:, int(b)].transpose(-1, -2)

@@ -144,10 +144,9 @@ class SceneSet:
         """Every scene folder (with ``scene.json``) under ``path`` (symbolic links followed, so a folder of links
         composes scene sets), optionally only those of ``kind`` and of data group ``data``
         (``cat.terrain.data_groups``); grid shapes may differ. Fields are read (or built) one scene at a time while
-        the bank fills; saved fields
-        that do not match ``field_cfg`` (or the scene) are rebuilt (``on_stale="rebuild"``) or refused
-        (``"error"``: raises :class:`cat.fields.StaleFieldError`). ``mirror`` adds each scene's mirror image
-        (its fields built anew)."""
+        the bank fills; saved fields that do not match ``field_cfg`` (or the scene) are rebuilt
+        (``on_stale="rebuild"``) or refused (``"error"``: raises :class:`cat.fields.StaleFieldError`). ``mirror`` adds
+        each scene's mirror image (its fields built anew)."""
         if on_stale not in ("rebuild", "error"):
             raise SceneSetError(f"on_stale must be 'rebuild' or 'error', got {on_stale!r}")
         root = Path(path)

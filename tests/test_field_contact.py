@@ -169,7 +169,8 @@ def _fk_poses(model: mujoco.MjModel, bodies: list[str], qpos: np.ndarray) -> tup
 def agreement() -> dict[str, tuple[int, int, int, int]]:
     """Per typical type: (steps, physical contact steps, field-only, physical-only) over random-action rollouts
     of 16 envs x 50 steps from the env's own episode starts, physical obstacles; the field judgement is made on
-    the same states (body poses by forward kinematics after each control step)."""
+    the same states (body poses by forward kinematics after each control step); culled, unculled and the torch
+    reference judge alike on every step."""
     out = {}
     for kind in TYPICAL_KINDS:
         sset = SceneSet.typical(kind, 16, variants=2)
@@ -187,6 +188,8 @@ def agreement() -> dict[str, tuple[int, int, int, int]]:
             assert torch.equal(
                 sdf < fc.cfg.margin, full.body_sdf(sset.bank, env.field_source.field_idx, pos, quat) < fc.cfg.margin
             )
+            ref = fc.body_sdf_torch(sset.bank, env.field_source.field_idx, pos, quat)  # the fused kernel's reference
+            assert torch.equal(sdf < fc.cfg.margin, ref < fc.cfg.margin)
             phys.append(env.state.collision.clone())
             field.append((sdf < fc.cfg.margin).any(-1))
         p, f = torch.cat(phys), torch.cat(field)

@@ -32,6 +32,7 @@ import torch
 from cat.envs.math_utils import quat_to_matrix
 from cat.envs.robot import RobotCfg
 from cat.envs.scene import build_env_model
+from cat.fields.body_points import BodyPoints
 
 if TYPE_CHECKING:
     from cat.envs.traversal_env import TraversalEnv
@@ -188,7 +189,10 @@ class FieldContact:
         self.hard_bodies = torch.tensor([b not in ghost_parts for b in self.bodies], device=self.device)
         self.ghost_obstacles = ghost_obstacles
         self.cull = True
+        self.fused = True
+        """Judge with the fused Warp kernel (:meth:`FieldBank.min_sdf_on_bodies`); False: the torch reference."""
         self._cols: torch.Tensor | None = None
+        self._packed: dict[torch.device, BodyPoints] = {}
 
     def sensor_columns(self, sensors: dict) -> None:
         """Find the pose sensors of the bodies in a backend's ``sensors`` (name -> ``SensorSlice``)."""
@@ -206,8 +210,22 @@ class FieldContact:
         q = x[..., 3:]
         return x[..., :3], q / q.norm(dim=-1, keepdim=True).clamp_min(1e-9)
 
+    def body_points(self, device: torch.device) -> BodyPoints:
+        """The sample points packed for the fused kernel on ``device`` (cull distance: radius + margin + slack)."""
+        if device not in self._packed:
+            cull = (self.geom_radius + self.cfg.margin + CULL_SLACK).tolist()
+            self._packed[device] = BodyPoints.from_groups(self.geom_points, self.geom_body.tolist(), cull, device)[0]
+        return self._packed[device]
+
     def body_sdf(self, bank, field_idx: torch.Tensor, pos: torch.Tensor, quat: torch.Tensor) -> torch.Tensor:
         """(n, B) smallest SDF over each body's points (+inf: clear, or culled as clearly free)."""
+        if not self.fused:
+            return self.body_sdf_torch(bank, field_idx, pos, quat)
+        sdf = bank.min_sdf_on_bodies(field_idx, pos, quat, self.body_points(bank.device), cull=self.cull)
+        return sdf.to(self.device)
+
+    def body_sdf_torch(self, bank, field_idx: torch.Tensor, pos: torch.Tensor, quat: torch.Tensor) -> torch.Tensor:
+        """:meth:`body_sdf` in torch through ``bank.query`` (the reference the fused kernel is tested against)."""
         n, nb = pos.shape[:2]
         out = torch.full((n, nb), math.inf, device=self.device)
         if n == 0:

@@ -27,6 +27,7 @@ import warp as wp
 
 from cat.fields._bank_kernel import query_kernel, vec7
 from cat.fields._wp import get_device, run_concurrently
+from cat.fields.body_points import BodyPoints, min_sdf_kernel
 from cat.fields.config import FieldCfg
 from cat.fields.field import Field
 from cat.fields.grid import Grid
@@ -338,6 +339,69 @@ class FieldBank:
                 launch(0, n)
         else:
             parts = self.num_threads if n >= 256 else 1
+            bounds = [n * t // parts for t in range(parts + 1)]
+            run_concurrently(*[lambda t=t: launch(bounds[t], bounds[t + 1]) for t in range(parts)])
+        return out
+
+    def min_sdf_on_bodies(
+        self, field_idx: torch.Tensor, pos: torch.Tensor, quat: torch.Tensor, bodies: BodyPoints, cull: bool = True
+    ) -> torch.Tensor:
+        """(N, B) smallest d over each body's points of ``bodies``, posed by ``pos`` (N, B, 3) and unit ``quat``
+        (N, B, 4; w, x, y, z), in fields ``field_idx`` (N,): one fused kernel (:mod:`cat.fields.body_points`).
+
+        +inf where every point of the body lies outside its grid box or in a culled group (``cull=False``: none
+        is culled). Interpolation and out-of-grid rule are :meth:`query`'s."""
+        self._check_ready()
+        n, nb = pos.shape[:2]
+        if pos.shape != (n, bodies.num_bodies, 3) or quat.shape != (n, nb, 4) or field_idx.shape != (n,):
+            raise ValueError(f"pos {tuple(pos.shape)} / quat {tuple(quat.shape)} / field_idx {tuple(field_idx.shape)}")
+        out = torch.empty((n, nb), dtype=torch.float32, device=self.device)
+        if n == 0:
+            return out
+        p = pos.to(self.device, torch.float32).contiguous().view(-1, 3)
+        q = quat.to(self.device, torch.float32).contiguous().view(-1, 4)
+        idx = field_idx.to(self.device, torch.int32).contiguous()
+        if self.device.type == "cpu":  # an out-of-range field index would read foreign memory
+            lo, hi = int(idx.min()), int(idx.max())
+            if lo < 0 or hi >= self.num_fields:
+                raise IndexError(f"field_idx out of range [0, {self.num_fields}): min {lo}, max {hi}")
+        kernel = min_sdf_kernel(self._wp_scalar)
+        scene_ptr, _, meta = self._pointers()
+        i32, f32, v3 = wp.int32, wp.float32, wp.vec3
+        shared = [
+            wp.from_torch(bodies.body_start, dtype=i32),
+            wp.from_torch(bodies.group_start, dtype=i32),
+            wp.from_torch(bodies.centre, dtype=v3),
+            wp.from_torch(bodies.cull, dtype=f32),
+            wp.from_torch(bodies.points, dtype=v3),
+            int(cull),
+        ]
+        flat = out.view(-1)
+
+        def launch(e0: int, e1: int) -> None:
+            if e1 <= e0:
+                return
+            wp.launch(
+                kernel,
+                dim=(e1 - e0) * nb,
+                inputs=[
+                    scene_ptr,
+                    *meta[:5],
+                    wp.from_torch(idx[e0:e1], dtype=i32),
+                    wp.from_torch(p[e0 * nb : e1 * nb], dtype=v3),
+                    wp.from_torch(q[e0 * nb : e1 * nb], dtype=wp.vec4),
+                    nb,
+                    *shared,
+                    wp.from_torch(flat[e0 * nb : e1 * nb], dtype=f32),
+                ],
+                device=self._wp_device,
+            )
+
+        if self._wp_device.is_cuda:  # torch's current stream: no implicit sync
+            with wp.ScopedStream(wp.stream_from_torch(self.device)):
+                launch(0, n)
+        else:
+            parts = self.num_threads if n >= 64 else 1
             bounds = [n * t // parts for t in range(parts + 1)]
             run_concurrently(*[lambda t=t: launch(bounds[t], bounds[t + 1]) for t in range(parts)])
         return out

@@ -1,0 +1,187 @@
+# ruff: noqa: UP018  (Warp kernels need int(0)/float(0.0) to declare mutable locals)
+"""Smallest scene SDF over point sets fixed on rigid bodies: one fused Warp kernel per query.
+
+A :class:`BodyPoints` holds, per body, groups of points in the body's frame (e.g. the surface samples of each
+collision geom), each group with a bounding sphere. :func:`min_sdf_kernel` is one thread per (world, body): it
+rotates and translates the body's points by the body pose and returns the smallest trilinear d of the world's
+scene over them, reading the bank's d grid directly (no point buffer, no per-point query output).
+
+Semantics are the bank query's (:mod:`cat.fields._bank_kernel`): the same trilinear interpolation of the voxel
+centres, and a point outside its scene's grid box (or non-finite) is clear (+inf). A group whose bounding-sphere
+centre lies at d >= its cull distance (or outside the grid box by at least that much) is skipped: its points
+cannot be near an obstacle. The cull distances are the caller's (radius + margin + slack).
+
+No ``from __future__ import annotations`` here: Warp reads the annotations of the kernel built in a closure.
+"""
+
+import functools
+from dataclasses import dataclass
+
+import torch
+import warp as wp
+
+from cat.fields._bank_kernel import block_address
+
+
+@dataclass
+class BodyPoints:
+    """Point groups on B rigid bodies (torch tensors on the bank's device; group ``g`` belongs to one body).
+
+    Body ``b`` owns groups ``body_start[b]:body_start[b+1]``; group ``g`` owns points
+    ``group_start[g]:group_start[g+1]``. Groups are therefore stored body by body."""
+
+    points: torch.Tensor
+    """(P, 3) float32, body frame."""
+    group_start: torch.Tensor
+    """(G + 1,) int32."""
+    body_start: torch.Tensor
+    """(B + 1,) int32."""
+    centre: torch.Tensor
+    """(G, 3) float32: bounding-sphere centre of each group, body frame."""
+    cull: torch.Tensor
+    """(G,) float32: the group is skipped when d at its centre is >= this (radius + margin + slack)."""
+
+    @property
+    def num_bodies(self) -> int:
+        return int(self.body_start.shape[0]) - 1
+
+    @classmethod
+    def from_groups(
+        cls, groups: list[torch.Tensor], group_body: list[int], cull: list[float], device: torch.device
+    ) -> tuple["BodyPoints", list[int]]:
+        """Pack ``groups[g]`` (K_g, 3) of body ``group_body[g]`` with cull distances ``cull[g]``.
+
+        Returns the packing and the order of the groups in it (stable sort by body)."""
+        order = sorted(range(len(groups)), key=lambda g: group_body[g])
+        nb = max(group_body) + 1 if groups else 0
+        counts = torch.tensor([len(groups[g]) for g in order], dtype=torch.int64)
+        per_body = torch.bincount(torch.tensor(group_body, dtype=torch.int64), minlength=nb)
+        zero = torch.zeros(1, dtype=torch.int64)
+        pts = [groups[g].to(torch.float32).cpu() for g in order]
+        centre = [0.5 * (p.amin(0) + p.amax(0)) for p in pts]
+        i32, f32 = dict(dtype=torch.int32, device=device), dict(dtype=torch.float32, device=device)
+        return (
+            cls(
+                points=torch.cat(pts).to(**f32).contiguous(),
+                group_start=torch.cat((zero, counts.cumsum(0))).to(**i32),
+                body_start=torch.cat((zero, per_body.cumsum(0))).to(**i32),
+                centre=torch.stack(centre).to(**f32).contiguous(),
+                cull=torch.tensor([cull[g] for g in order], **f32),
+            ),
+            order,
+        )
+
+
+@functools.cache
+def min_sdf_kernel(scalar: type) -> wp.Kernel:
+    """The fused (world, body) min-SDF kernel for bank storage type ``scalar`` (float32 / float16); math in float32."""
+    v4 = wp.types.vector(length=4, dtype=scalar)
+    scene_bytes = wp.types.type_size_in_bytes(v4)
+
+    @wp.func
+    def trilinear_d(
+        sd: wp.array(dtype=v4), u: wp.vec3, nx: int, ny: int, nz: int, o1: int, o2: int, o3: int
+    ) -> wp.float32:
+        """d at continuous grid index ``u``: the bank query's interpolation (voxel centres, clamp to edge)."""
+        cx = wp.clamp(u[0] - 0.5, 0.0, float(nx - 1))
+        cy = wp.clamp(u[1] - 0.5, 0.0, float(ny - 1))
+        cz = wp.clamp(u[2] - 0.5, 0.0, float(nz - 1))
+        i0 = wp.min(int(cx), wp.max(nx - 2, 0))
+        j0 = wp.min(int(cy), wp.max(ny - 2, 0))
+        k0 = wp.min(int(cz), wp.max(nz - 2, 0))
+        fx = cx - float(i0)
+        fy = cy - float(j0)
+        fz = cz - float(k0)
+        gx = 1.0 - fx
+        gy = 1.0 - fy
+        gz = 1.0 - fz
+        b = (i0 * ny + j0) * nz + k0
+        s00 = gz * float(sd[b][0]) + fz * float(sd[b + o3][0])
+        s01 = gz * float(sd[b + o2][0]) + fz * float(sd[b + o2 + o3][0])
+        s10 = gz * float(sd[b + o1][0]) + fz * float(sd[b + o1 + o3][0])
+        s11 = gz * float(sd[b + o1 + o2][0]) + fz * float(sd[b + o1 + o2 + o3][0])
+        return gx * (gy * s00 + fy * s01) + fx * (gy * s10 + fy * s11)
+
+    @wp.kernel(module="unique")
+    def min_sdf(
+        scene_ptr: wp.uint64,
+        scene_offset: wp.array(dtype=wp.int64),
+        scene_shape: wp.array(dtype=wp.vec3i),
+        scene_origin: wp.array(dtype=wp.vec3),
+        scene_inv_voxel: wp.array(dtype=wp.float32),
+        field_scene: wp.array(dtype=wp.int32),
+        field_idx: wp.array(dtype=wp.int32),
+        body_pos: wp.array(dtype=wp.vec3),
+        body_quat: wp.array(dtype=wp.vec4),
+        num_bodies: int,
+        body_start: wp.array(dtype=wp.int32),
+        group_start: wp.array(dtype=wp.int32),
+        centre: wp.array(dtype=wp.vec3),
+        cull: wp.array(dtype=wp.float32),
+        points: wp.array(dtype=wp.vec3),
+        use_cull: int,
+        out: wp.array(dtype=wp.float32),
+    ):
+        """One thread per (world, body): min over the body's unculled groups of the trilinear d at its points."""
+        t = wp.tid()
+        s = field_scene[field_idx[t / num_bodies]]
+        b = t % num_bodies
+        shp = scene_shape[s]
+        nx = shp[0]
+        ny = shp[1]
+        nz = shp[2]
+        sd = wp.array(
+            ptr=block_address(scene_ptr, scene_offset[s], wp.int64(wp.static(scene_bytes))),
+            shape=(nx * ny * nz,),
+            dtype=v4,
+        )
+        org = scene_origin[s]
+        inv = scene_inv_voxel[s]
+        o1 = wp.where(nx > 1, ny * nz, 0)
+        o2 = wp.where(ny > 1, nz, 0)
+        o3 = wp.where(nz > 1, 1, 0)
+        q = body_quat[t]  # (w, x, y, z), unit
+        w = q[0]
+        x = q[1]
+        y = q[2]
+        z = q[3]
+        rot = wp.mat33(
+            1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y),
+            2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x),
+            2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y),
+        )  # fmt: skip
+        pos = body_pos[t]
+        best = float(wp.inf)
+        for g in range(body_start[b], body_start[b + 1]):
+            k0 = group_start[g]
+            k1 = group_start[g + 1]
+            if use_cull != 0:  # d at the bounding-sphere centre (outside the grid: distance to the grid box)
+                u = (pos + rot * centre[g] - org) * inv
+                if not (wp.isfinite(u[0]) and wp.isfinite(u[1]) and wp.isfinite(u[2])):
+                    k1 = k0  # a non-finite pose touches nothing
+                else:
+                    ex = wp.max(wp.max(-u[0], u[0] - float(nx)), 0.0)
+                    ey = wp.max(wp.max(-u[1], u[1] - float(ny)), 0.0)
+                    ez = wp.max(wp.max(-u[2], u[2] - float(nz)), 0.0)
+                    d = wp.sqrt(ex * ex + ey * ey + ez * ez) / inv
+                    if d == 0.0:
+                        d = trilinear_d(sd, u, nx, ny, nz, o1, o2, o3)
+                    if d >= cull[g]:
+                        k1 = k0
+            for k in range(k0, k1):
+                u = (pos + rot * points[k] - org) * inv
+                if (
+                    u[0] >= 0.0
+                    and u[1] >= 0.0
+                    and u[2] >= 0.0
+                    and u[0] <= float(nx)
+                    and u[1] <= float(ny)
+                    and u[2] <= float(nz)
+                ):  # also False for NaN: a non-finite point is clear
+                    best = wp.min(best, trilinear_d(sd, u, nx, ny, nz, o1, o2, o3))
+        out[t] = best
+
+    return min_sdf
+
+
+__all__ = ["BodyPoints", "min_sdf_kernel"]

@@ -1,0 +1,121 @@
+"""The fused field-contact kernel (``FieldBank.min_sdf_on_bodies``) judges exactly as the torch reference.
+
+``FieldContact.body_sdf`` (one Warp launch: pose the body points, trilinear d, min per body, culling) against
+``FieldContact.body_sdf_torch`` (torch transforms + ``bank.query`` per point): the constructed 2 cm-inside /
+1 cm-clear poses, random rigid poses over typical scenes (in and out of the grid, non-finite, float32 and float16
+banks), and a random-action rollout (``tests/test_field_contact.py``'s agreement fixture compares the two on
+every step too).
+"""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+import torch
+
+from cat.envs.config import EnvCfg
+from cat.envs.field_contact import CULL_SLACK, FieldContact
+from cat.envs.scene_set import SceneSet
+from cat.envs.traversal_env import TraversalEnv
+from cat.fields import FieldBank
+from cat.fields.body_points import BodyPoints
+from tests.test_field_contact import FACE_X, front_offset, pose_at, wall_env
+
+
+def assert_same_judgement(fc: FieldContact, fused: torch.Tensor, ref: torch.Tensor) -> None:
+    """Same contact decisions; same d up to float rounding wherever either is below the cull horizon.
+
+    Above ``margin + CULL_SLACK / 2`` a geom may be culled by one and not the other (its centre rounds across the
+    cull distance): both are then far from contact, so values are compared capped there."""
+    m = fc.cfg.margin
+    assert torch.equal(fused < m, ref < m)
+    cap = m + 0.5 * CULL_SLACK
+    torch.testing.assert_close(fused.clamp(max=cap), ref.clamp(max=cap), rtol=0.0, atol=2e-5)
+
+
+def both(fc: FieldContact, bank, idx, pos, quat, cull: bool = True) -> tuple[torch.Tensor, torch.Tensor]:
+    fc.cull = cull
+    try:
+        return fc.body_sdf(bank, idx, pos, quat), fc.body_sdf_torch(bank, idx, pos, quat)
+    finally:
+        fc.cull = True
+
+
+def test_constructed_poses_inside_and_clear_judge_the_same():
+    """2 cm into the wall and 1 cm clear (and a world with its wall far away): equal d per body, equal contact."""
+    env = wall_env("field", faces=(FACE_X, 1.4))
+    fc, bank, idx = env.field_contact, env.field_source.bank, env.field_source.field_idx
+    dx = front_offset(env)
+    for depth, expect in ((0.02, [True, False]), (-0.01, [False, False])):
+        pose_at(env, FACE_X + depth - dx)
+        pos, quat = fc.poses(env.sim.sensordata.float())
+        for cull in (True, False):
+            fused, ref = both(fc, bank, idx, pos, quat, cull)
+            assert_same_judgement(fc, fused, ref)
+            assert ((fused < fc.cfg.margin).any(-1)).tolist() == expect
+        assert env.state.collision.tolist() == expect  # the env's judgement is the fused one
+        assert abs(float(fused[0].min()) - (-depth)) < 1e-4  # the frontmost point is `depth` into the wall
+
+
+@pytest.fixture(scope="module")
+def typical_env() -> TraversalEnv:
+    """8 field-mode worlds over two typical kinds, two variants each."""
+    sset = SceneSet.typical(["hurdle-crouch", "side-pass"], 8, variants=2)
+    return TraversalEnv(EnvCfg(num_envs=8), scenes=sset, obstacles="field")
+
+
+def random_poses(bank: FieldBank, idx: torch.Tensor, nb: int, g: torch.Generator, spill: float = 0.3):
+    """Body positions uniform over each field's grid box grown by ``spill`` m (some points out of the grid), and
+    uniformly random orientations."""
+    lo, hi = bank.field_bounds(idx)
+    u = torch.rand(len(idx), nb, 3, generator=g)
+    pos = (lo - spill)[:, None] + u * (hi - lo + 2 * spill)[:, None]
+    q = torch.randn(len(idx), nb, 4, generator=g)
+    return pos, q / q.norm(dim=-1, keepdim=True)
+
+
+@pytest.mark.parametrize("dtype", ["float32", "float16"])
+def test_random_poses_judge_the_same(typical_env, dtype):
+    env = typical_env
+    fc = env.field_contact
+    src = env.field_source.bank
+    bank = src if dtype == "float32" else FieldBank(src.layouts, "float16")
+    if dtype == "float16":
+        bank.scene_data.copy_(src.scene_data)
+        bank.goal_data.copy_(src.goal_data)
+        bank.scene_origin.copy_(src.scene_origin)
+        bank._unfilled.clear()
+    g = torch.Generator().manual_seed(0)
+    idx = torch.randint(0, bank.num_fields, (512,), generator=g)
+    pos, quat = random_poses(bank, idx, len(fc.bodies), g)
+    pos[0, 3] = math.nan  # a non-finite body is clear, its neighbours are judged as usual
+    quat[1, 2] = math.inf
+    for cull in (True, False):
+        fused, ref = both(fc, bank, idx, pos, quat, cull)
+        assert_same_judgement(fc, fused, ref)
+        assert math.isinf(fused[0, 3]) and math.isinf(fused[1, 2])
+    touching = int((fused < fc.cfg.margin).sum())
+    assert 0.05 * fused.numel() < touching < 0.95 * fused.numel()  # the poses exercise both outcomes
+    assert torch.isinf(fused).any() and torch.isfinite(fused).any()
+
+
+def test_rollout_judges_the_same(typical_env):
+    """Random actions from the episode starts: every control step, the env's sensors, both judgements."""
+    env = typical_env
+    fc, bank = env.field_contact, env.field_source.bank
+    g = torch.Generator().manual_seed(3)
+    for _ in range(30):
+        env.step(0.5 * torch.randn(env.num_envs, env.num_actions, generator=g))
+        pos, quat = fc.poses(env.sim.sensordata.float())
+        fused, ref = both(fc, bank, env.field_source.field_idx, pos, quat)
+        assert_same_judgement(fc, fused, ref)
+
+
+def test_body_points_packing_keeps_every_point_with_its_body():
+    groups = [torch.rand(k, 3) for k in (3, 5, 2, 4)]
+    packed, order = BodyPoints.from_groups(groups, [1, 0, 1, 2], [0.1, 0.2, 0.3, 0.4], torch.device("cpu"))
+    assert order == [1, 0, 2, 3] and packed.num_bodies == 3
+    assert packed.body_start.tolist() == [0, 1, 3, 4] and packed.group_start.tolist() == [0, 5, 8, 10, 14]
+    torch.testing.assert_close(packed.points[5:8], groups[0])
+    torch.testing.assert_close(packed.cull, torch.tensor([0.2, 0.1, 0.3, 0.4]))

@@ -1,6 +1,7 @@
-"""docs/extending.md's worked example, run as written: its toy observation term and toy reward term are
-registered from outside the package, an env (flat, 4 worlds, sim=mujoco) reads and scores them, and an ONNX
-policy exported from a run with the term reads one more input (run in onnxruntime)."""
+"""docs/extending.md's worked example, run as written: its toy observation term (one declaration) and toy reward
+term are registered from outside the package, an env (flat, 4 worlds, sim=mujoco) reads them with the declared
+noise and mirror map and scores them, the deploy runtime refuses the undeployable term, and an ONNX policy
+exported from a run with the term reads one more input (run in onnxruntime)."""
 
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ from cat.deploy.export import ExportCfg, export
 from cat.deploy.metadata import read_metadata
 from cat.deploy.policy import TorchPolicy
 from cat.envs.mdp.registry import OBS_TERMS, REWARD_TERMS, register_observation, register_reward
+from cat.envs.obs_groups import group_layout
 from cat.learning.config import policy_model
 from cat.learning.hydra_cfg import load_config
 from cat.learning.runs import make_env, save_config
@@ -64,15 +66,33 @@ def test_env_reads_and_scores_the_new_terms(example):
     obs = env.get_observations()
     assert obs["actor"].shape[-1] == base.get_observations()["actor"].shape[-1] + 1
     assert "pelvis_height" in env.reward_names and "pelvis_height" not in base.reward_names
+    assert "time_left" in group_layout(cfg.task, "actor")[0]
     col = env.observation_groups.term_columns(env, "actor").index("time_left")
-    first = obs["actor"][:, col].clone()
+    first = obs["critic"][:, col].clone()  # the critic extends the actor: same column, read without noise
     for _ in range(5):
         obs, _, _, _ = env.step(torch.zeros(env.num_envs, env.num_actions))
-    assert torch.all(obs["actor"][:, col] < first)  # the episode's time runs out
+    assert torch.all(obs["critic"][:, col] < first)  # the episode's time runs out
+    noise = obs["actor"][:, col] - obs["critic"][:, col]  # the declared noise at task.noise.extra's scale
+    assert torch.all(noise != 0) and torch.all(noise.abs() <= 0.001)
     assert torch.all(env.episode_sums["pelvis_height"] < 0)  # the weight is negative, the error positive
+    perm, sign = env.mirror_map.obs["actor"]  # symmetry reads the declared mirror map
+    assert len(perm) == obs["actor"].shape[-1] and perm[col] == col and sign[col] == 1.0
     with pytest.raises(ValueError, match="unknown reward term 'nope'"):
         bad = load_config(["task=flat", "sim=mujoco", "num_envs=4", "+task.rewards.extra.nope=1.0"])
         make_env(bad)
+    with pytest.raises(ValueError, match="not an observation term declared with noise"):
+        make_env(load_config(["task=flat", "sim=mujoco", "num_envs=4", "+task.noise.extra.last_action=0.1"]))
+
+
+def test_the_deploy_runtime_refuses_the_undeployable_term(example):
+    from cat.deploy.policy import PolicySpec
+    from cat.deploy.runtime import DeployCfg, Runtime
+    from cat.deploy.scenes import load_scene
+
+    cfg = load_config(example["OVERRIDES"])
+    example["turn_on"](cfg)
+    with pytest.raises(ValueError, match=r"\['time_left'\], which this deployed robot does not compute"):
+        Runtime(load_scene("flat"), PolicySpec("hold", cfg.task, obs_groups=["actor"]), DeployCfg(realtime=False))
 
 
 def test_onnx_policy_reads_the_new_term(example, tmp_path):
@@ -91,7 +111,8 @@ def test_onnx_policy_reads_the_new_term(example, tmp_path):
 
     meta = read_metadata(out)
     terms = [t["name"] for t in meta.observation["actor"]["terms"]]
-    assert terms[-1] == "time_left" and meta.observation["actor"]["terms"][-1]["size"] == 1
+    last = meta.observation["actor"]["terms"][-1]
+    assert terms[-1] == "time_left" and (last["size"], last["note"]) == (1, "fraction of the episode left")
     assert meta.obs_dim == obs["actor"].shape[-1]
     session = onnxruntime.InferenceSession(str(out), providers=["CPUExecutionProvider"])
     x = obs["actor"].numpy().astype(np.float32)

@@ -20,13 +20,11 @@ import numpy as np
 from cat.envs.config import EnvCfg
 from cat.envs.mdp.registry import OBS_TERMS
 from cat.envs.obs_groups import resolve_groups
-from cat.envs.perception import map_shape, voxel_shape
 from cat.envs.robot import RobotCfg
 from cat.fields import FieldCfg
 from cat.learning.runs import CheckpointError
 
 FORMAT = "cat-policy/1"
-GOAL_COMMAND_CLIP = 5.0  # cat.envs.mdp.observations.goal_command: horizontal goal distance scaled to at most 5 m
 
 
 class PolicyFileError(CheckpointError):
@@ -44,60 +42,14 @@ class TermInfo:
     note: str = ""
 
 
-# name -> (size from (task, robot), clip from task, meaning). Sizes are checked against the env in the tests.
-_TERMS = {
-    "gyro": (lambda t, r: 3, None, "pelvis angular velocity in the pelvis frame [rad/s] (IMU gyro)"),
-    "projected_gravity": (lambda t, r: 3, None, "unit gravity vector in the pelvis frame"),
-    "joint_pos": (lambda t, r: r.num_joints, None, "joint angles minus default_joint_pos, joint_names order [rad]"),
-    "joint_vel": (lambda t, r: r.num_joints, None, "joint velocities, joint_names order [rad/s]"),
-    "last_action": (lambda t, r: len(r.policy_joints), None, "previous action after the action clip"),
-    "leg_targets": (lambda t, r: len(r.policy_joints), None, "PD targets of policy_joints minus their defaults [rad]"),
-    "goal_command": (
-        lambda t, r: 3,
-        lambda t: GOAL_COMMAND_CLIP,
-        "goal minus root in the yaw frame (x, y, z) [m]; x, y scaled so their norm is at most clip",
-    ),
-    "gait_phase": (lambda t, r: 2, None, "sin, cos of 2 pi phase; phase += gait freq * control_dt per step"),
-    "field_block": (
-        lambda t, r: 7 * len(r.query_links),
-        lambda t: t.field_obs.sdf_clip,
-        "per query link: F_H (3), grad d (3) in the yaw frame, d clipped to +-clip [m]; refreshed at refresh_hz",
-    ),
-    "field_block_odometry": (
-        lambda t, r: 7 * len(r.query_links),
-        lambda t: t.field_obs.sdf_clip,
-        "field_block at the links placed by the odometry pose (trained with a drifting pose error); on a robot, "
-        "its field_block",
-    ),
-    "base_lin_vel": (lambda t, r: 3, None, "root velocity in the yaw frame [m/s] (privileged)"),
-    "base_height": (lambda t, r: 1, None, "root height [m] (privileged)"),
-    "link_positions": (lambda t, r: 3 * len(r.query_links), None, "query links minus root, yaw frame (privileged)"),
-    "foot_contacts": (lambda t, r: 2, None, "left, right foot contact in {0, 1} (privileged)"),
-    "dr_scales": (lambda t, r: 3, None, "domain-randomisation scales kp, kd, mass (privileged)"),
-    "scene_group": (lambda t, r: 1, None, "index of the env's scene group (distillation routing, not a network input)"),
-    "elevation_map": (
-        lambda t, r: 2 * int(np.prod(map_shape(t.perception.height_map))),
-        lambda t: t.perception.height_map.overhead_cap,
-        "ground then overhead layer of the yaw-frame height map [m], overhead capped at clip",
-    ),
-    "ground_map": (lambda t, r: int(np.prod(map_shape(t.perception.height_map))), None, "ground layer [m]"),
-    "overhead_map": (
-        lambda t, r: int(np.prod(map_shape(t.perception.height_map))),
-        lambda t: t.perception.height_map.overhead_cap,
-        "overhead layer [m], capped at clip",
-    ),
-    "voxel_grid": (lambda t, r: int(np.prod(voxel_shape(t.perception.voxel_grid))), None, "occupancy in {0, 1}"),
-}
-
-
 def term_info(name: str, task: EnvCfg, robot: RobotCfg, size: int | None = None) -> TermInfo:
-    """A term's layout from the task and robot (``size`` given: measured, e.g. by the runtime)."""
-    reg = OBS_TERMS.get(name)  # a term registered outside the package (cat.envs.mdp.registry)
-    unknown = (reg.size, None, reg.note) if reg is not None else (lambda t, r: None, None, "unknown to this version")
-    size_fn, clip_fn, note = _TERMS.get(name, unknown)
-    return TermInfo(
-        name, size if size is not None else size_fn(task, robot), 1.0, clip_fn(task) if clip_fn else None, note
-    )
+    """A term's layout from its declaration (``cat.envs.mdp.registry``) and the task and robot (``size`` given:
+    measured, e.g. by the runtime); a term this version does not know has no size."""
+    term = OBS_TERMS.get(name)
+    if term is None:
+        return TermInfo(name, size, 1.0, None, "unknown to this version")
+    clip = term.clip(task) if term.clip is not None else None
+    return TermInfo(name, size if size is not None else term.size(task, robot), 1.0, clip, term.note)
 
 
 @dataclass

@@ -4,10 +4,11 @@ The simulator (MuJoCo C, one ``MjData``) plays the world and the sensors. The co
 has: IMU (gyro, orientation), joint encoders, an odometry pose (here the simulator's pelvis pose plus optional
 noise: the stand-in for the paper's LiDAR-inertial odometry) and the live HumanoidPF from its own LiDAR map
 (``cat.deploy.perception``). The observation groups the policy reads (``PolicySpec.obs_groups``: the actor, or
-a distilled student) are built by the env's own term functions (``cat.envs.mdp.observations``) on a one-robot
-context, the field block by the same ``field_obs``, and actions go through the same ``apply_actions``. The
-policy is a checkpoint or an exported ONNX file (``cat.deploy.policy``); an ONNX file whose metadata differs
-from this runtime's layout is refused.
+a distilled student) are built by the env's own ``ObservationGroups`` (noise off: same terms, same history
+stacking) on a one-robot context, the field block by the same ``field_obs``, and actions go through the same
+``apply_actions``. Only terms declared ``deployable`` (``cat.envs.mdp.observations``) are computed. The policy is
+a checkpoint or an exported ONNX file (``cat.deploy.policy``); an ONNX file whose metadata differs from this
+runtime's layout is refused.
 """
 
 from __future__ import annotations
@@ -28,13 +29,13 @@ from cat.deploy.perception import LiveField, Perception, PerceptionCfg, RobotEst
 from cat.deploy.policy import PolicySpec, load_policy
 from cat.deploy.scenes import GoalChecker
 from cat.deploy.voxel_map import map_grid
-from cat.envs.config import ACTOR_TERMS, EnvCfg
+from cat.envs.config import EnvCfg
 from cat.envs.math_utils import yaw_from_quat, yaw_quat
-from cat.envs.mdp import observations as obs_terms
 from cat.envs.mdp import terminations as term_terms
 from cat.envs.mdp.actions import apply_actions, soft_joint_limits
 from cat.envs.mdp.field_obs import field_obs
-from cat.envs.obs_groups import lookup_term, resolve_groups
+from cat.envs.mdp.registry import OBS_TERMS
+from cat.envs.obs_groups import ObservationGroups, resolve_groups
 from cat.envs.robot import RobotCfg, home_qpos, load_robot_cfg
 from cat.envs.scene import COLLISION_SENSOR, build_env_model
 from cat.envs.traversal_env import SimState
@@ -44,10 +45,6 @@ from cat.terrain import Scene
 from cat.terrain.mujoco_export import add_obstacles_to_spec
 
 log = logging.getLogger(__name__)
-
-DEPLOYABLE_TERMS = (*ACTOR_TERMS, "field_block_odometry")
-"""Observation terms a robot can compute (the default actor group and the student's drifting field block, which
-on a robot is its ``field_block``: that comes from the odometry pose already); others are refused."""
 
 
 @dataclass
@@ -120,11 +117,8 @@ class Runtime:
         self.scene, self.spec = scene, spec
         self.cfg: EnvCfg = spec.task  # named as in the env: the shared term functions read ``env.cfg``
         self.task = self.cfg
-        self.group_terms = _deployable_groups(self.task, spec.obs_groups)
-        self.history = {g: int(self.task.observations[g].history) for g in self.group_terms}
-        self._history: dict[str, torch.Tensor] = {}  # group -> (1, H, D) last H vectors the policy read
-        names = dict.fromkeys(t for terms in self.group_terms.values() for t in terms)
-        self._term_fns = {t: lookup_term(obs_terms, t, "observation") for t in names}
+        _check_deployable(self.task, spec.obs_groups)
+        self.observation_groups = ObservationGroups(self.task, list(spec.obs_groups), noise=False)
         self.robot = robot or load_robot_cfg()
         self.field_cfg = field_cfg or FieldCfg()
         has_obstacles = len(scene.mesh.faces) > 0
@@ -199,7 +193,7 @@ class Runtime:
             self._prev_link_pos: torch.Tensor | None = None
             self._links_step = -1
             self._released = False
-            self._history = {}  # stacked groups restart, filled with their next value (as at an env reset)
+            self.observation_groups.reset()  # stacked groups restart, filled with their next value (as at an env reset)
             self._in_contact = False
             self._update_state(self.estimate())
             if hasattr(self, "policy"):
@@ -207,9 +201,11 @@ class Runtime:
 
     def _layout(self) -> PolicyMetadata:
         """This runtime's observation / action / field layout, with term sizes as it computes them."""
-        sizes = {t: int(fn(self).shape[-1]) for t, fn in self._term_fns.items()}
+        sizes = {t: int(fn(self).shape[-1]) for t, fn in self.observation_groups.fns.items()}
         limits = torch.stack((self.soft_lower, self.soft_upper), dim=-1).numpy()
-        return layout_metadata(self.robot, self.field_cfg, self.task, list(self.group_terms), limits, sizes)
+        return layout_metadata(
+            self.robot, self.field_cfg, self.task, list(self.observation_groups.groups), limits, sizes
+        )
 
     # --- what the robot knows -------------------------------------------------------------------------------
     def estimate(self) -> RobotEstimate:
@@ -294,19 +290,7 @@ class Runtime:
         A group with ``history`` H > 1 is its last H vectors, oldest first, the older ones those the policy read
         at its previous steps (all the current one after a reset or at release). ``commit``: this observation is
         the one the policy reads at this control step (the history moves on); otherwise nothing changes."""
-        values = {t: fn(self) for t, fn in self._term_fns.items()}
-        out = {}
-        for g, terms in self.group_terms.items():
-            value = torch.cat([values[t] for t in terms], dim=-1)
-            h = self.history[g]
-            if h > 1:
-                past = self._history.get(g)
-                stack = value[:, None].repeat(1, h, 1) if past is None else torch.cat((past[:, 1:], value[:, None]), 1)
-                if commit:
-                    self._history[g] = stack
-                value = stack.flatten(1)
-            out[g] = value
-        return TensorDict(out, batch_size=[1])
+        return self.observation_groups.compute(self, commit=commit)
 
     # --- goals ----------------------------------------------------------------------------------------------
     def set_goal(self, xy) -> np.ndarray:
@@ -344,7 +328,7 @@ class Runtime:
             if self.walking:
                 if not self._released:  # the policy's first step: fresh recurrent state and history, as at a reset
                     self.policy.reset()
-                    self._history = {}
+                    self.observation_groups.reset()
                     self._released = True
                 with torch.inference_mode():
                     act = self.policy(self.observation(commit=True))
@@ -457,20 +441,17 @@ class Runtime:
                     next_t = time.monotonic()
 
 
-def _deployable_groups(task: EnvCfg, obs_groups: list[str]) -> dict[str, list[str]]:
-    """Group -> terms for the groups a policy reads; ``ValueError`` for a group the task lacks, a term a robot
-    cannot compute or a history below 1."""
+def _check_deployable(task: EnvCfg, obs_groups: list[str]) -> None:
+    """``ValueError`` for a group the task lacks, a term a robot cannot compute (not declared ``deployable``) or a
+    history below 1."""
     groups = resolve_groups(task.observations)
-    out = {}
     for g in obs_groups:
         if g not in groups:
             raise ValueError(f"the policy reads observation group {g!r}, its task has {', '.join(groups)}")
         if int(task.observations[g].history) < 1:
             raise ValueError(f"observation group {g!r} has history={task.observations[g].history}; must be >= 1")
-        bad = [t for t in groups[g] if t not in DEPLOYABLE_TERMS]
+        bad = [t for t in groups[g] if t not in OBS_TERMS or not OBS_TERMS[t].deployable]
         if bad:
             raise ValueError(f"the policy observes {bad}, which this deployed robot does not compute")
-        out[g] = groups[g]
-    if not out:
+    if not obs_groups:
         raise ValueError("the policy reads no observation group")
-    return out

@@ -109,12 +109,14 @@ class PerceptionCfg:
 
 @dataclass
 class NoiseCfg:
-    """Observation noise per term, keyed by term name (zero or absent: no noise), in groups with ``noise: true``.
+    """Observation noise scale per term, keyed by term name (zero or absent: no noise), in groups with
+    ``noise: true``; how a term reads it is its declaration's ``TermNoise`` (``cat.envs.mdp.observations``).
 
     Uniform U(-s, s) added to every value; for the occupancy term ``voxel_grid``, s is the probability that a
     cell reads flipped. ``odometry_xy`` / ``odometry_yaw`` are not value noise: they drive the random-walk pose
     error of the ``field_block_odometry`` term (``cat.envs.odometry``), on whenever ``enabled`` and some group
-    lists that term.
+    lists that term. ``extra``: the scale of terms without a field here (a new or registered term declared with
+    noise: ``+task.noise.extra.<term>=<scale>``).
     """
 
     enabled: bool = True
@@ -134,6 +136,7 @@ class NoiseCfg:
     ground_map: float = 0.03
     overhead_map: float = 0.03
     voxel_grid: float = 0.02  # flip probability per cell
+    extra: dict[str, float] = field(default_factory=dict)
 
 
 @dataclass

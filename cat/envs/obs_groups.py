@@ -2,13 +2,14 @@
 from term lists in ``EnvCfg.observations``, each with its own noise switch, so baselines and distillation only
 change config.
 
-A group's terms are the functions of ``cat.envs.mdp.observations`` named in its list, concatenated in order,
-after the resolved terms of the group it ``extends``. Every term is evaluated once per step and shared by the
-groups that list it; groups with ``noise: true`` read it with ``NoiseCfg``'s per-term noise, drawn once per step
-and term, so every noisy group sees the same reading (one sensor, one reading: a distillation teacher with
-``noise: true`` labels from exactly what the student observes); terms in ``SHARED_NOISE`` use the draw of the
-term they are another placement of. A group with ``history: H`` > 1 reads its last
-H vectors (noisy as observed), oldest first.
+A group's terms are the observation terms named in its list (their declarations: ``cat.envs.mdp.registry``),
+concatenated in order, after the resolved terms of the group it ``extends``. Every term is evaluated once per step
+and shared by the groups that list it; groups with ``noise: true`` read it with its declared noise
+(``TermNoise``) at ``NoiseCfg``'s scale, drawn once per step and term, so every noisy group sees the same reading
+(one sensor, one reading: a distillation teacher with ``noise: true`` labels from exactly what the student
+observes); a term whose noise ``shares`` another's uses that term's draw. A group with ``history: H`` > 1 reads
+its last H vectors (noisy as observed), oldest first. The deploy runtime builds its groups with this class too
+(noise off), so a robot stacks history exactly as the env does.
 """
 
 from __future__ import annotations
@@ -21,17 +22,11 @@ from typing import TYPE_CHECKING
 import torch
 from tensordict import TensorDict
 
-from cat.envs.config import PRIVILEGED_TERMS, EnvCfg, ObsGroupCfg
-from cat.envs.mdp import observations as obs_terms
-from cat.envs.mdp.registry import OBS_TERMS
+from cat.envs.config import PRIVILEGED_TERMS, EnvCfg, NoiseCfg, ObsGroupCfg
+from cat.envs.mdp.registry import OBS_TERMS, obs_term
 
 if TYPE_CHECKING:
     from cat.envs.traversal_env import TraversalEnv
-
-FLIP_NOISE_TERMS = frozenset({"voxel_grid"})  # occupancy in {0, 1}: noise flips cells instead of adding to them
-# terms that are one reading placed two ways share its noise draw: the HumanoidPF block at the true links and at
-# the links as the drifting odometry places them (a teacher reading the first labels with the student's error)
-SHARED_NOISE = {"field_block_odometry": "field_block"}
 
 
 def lookup_term(module, name: str, kind: str, registered: Mapping[str, Callable] | None = None) -> Callable:
@@ -44,12 +39,6 @@ def lookup_term(module, name: str, kind: str, registered: Mapping[str, Callable]
         valid = term_names(module) + sorted(registered or ())
         raise ValueError(f"unknown {kind} term {name!r}; valid: {', '.join(valid)}")
     return fn
-
-
-def observation_fns(module=obs_terms) -> dict[str, Callable]:
-    """Observation terms registered outside the package (``cat.envs.mdp.registry``), when ``module`` is the
-    built-in one."""
-    return {k: t.fn for k, t in OBS_TERMS.items()} if module is obs_terms else {}
 
 
 def term_names(module) -> list[str]:
@@ -94,25 +83,48 @@ def resolve_groups(groups: dict[str, ObsGroupCfg]) -> dict[str, list[str]]:
     return {name: out[name] for name in groups}
 
 
-class ObservationGroups:
-    """Builds the env's observation ``TensorDict`` from the configured groups."""
+def noise_scale(noise: NoiseCfg, name: str) -> float:
+    """Scale of term ``name``'s noise in a noisy group: ``NoiseCfg.<name>``, else ``NoiseCfg.extra[name]``, else
+    zero; zero for a term declared without noise."""
+    term = OBS_TERMS.get(name)
+    if term is None or term.noise is None:
+        return 0.0
+    value = getattr(noise, name, None)
+    if isinstance(value, int | float) and not isinstance(value, bool):
+        return float(value)
+    return float(noise.extra.get(name, 0.0))
 
-    def __init__(self, cfg: EnvCfg, module=obs_terms):
+
+class ObservationGroups:
+    """Builds the observation ``TensorDict`` of the configured groups (the env's, or a robot's: ``groups`` the
+    policy reads, ``noise=False``)."""
+
+    def __init__(self, cfg: EnvCfg, groups: list[str] | None = None, noise: bool = True):
         self.cfg = cfg
-        self.groups = resolve_groups(cfg.observations)
-        self.noisy = {name: bool(g.noise) for name, g in cfg.observations.items()}
+        resolved = resolve_groups(cfg.observations)
+        missing = [g for g in groups or () if g not in resolved]
+        if missing:
+            raise ValueError(f"unknown observation group {missing[0]!r}; groups: {', '.join(resolved)}")
+        self.groups = resolved if groups is None else {g: resolved[g] for g in groups}
+        self.noisy = {name: noise and bool(cfg.observations[name].noise) for name in self.groups}
         names = dict.fromkeys(t for terms in self.groups.values() for t in terms)
-        self.fns = {t: lookup_term(module, t, "observation", observation_fns(module)) for t in names}
-        self.history = {name: int(g.history) for name, g in cfg.observations.items()}
+        self.terms = {t: obs_term(t) for t in names}
+        self.fns = {t: term.fn for t, term in self.terms.items()}
+        for name in cfg.noise.extra:
+            if name not in OBS_TERMS or OBS_TERMS[name].noise is None:
+                raise ValueError(f"task.noise.extra names {name!r}, not an observation term declared with noise")
+        self.history = {name: int(cfg.observations[name].history) for name in self.groups}
         for name, h in self.history.items():
             if h < 1:
                 raise ValueError(f"observation group {name!r} has history={h}; must be >= 1")
         self.buffers: dict[str, torch.Tensor] = {}  # group -> (n, H, D) for groups with history > 1
         self._fresh: torch.Tensor | None = None  # envs whose history restarts at the next compute
 
-    def reset(self, env_ids: torch.Tensor) -> None:
-        """Restart the history of ``env_ids`` (filled with their next observation)."""
-        if self._fresh is not None:
+    def reset(self, env_ids: torch.Tensor | None = None) -> None:
+        """Restart the history of ``env_ids`` (every env: None), filled with their next observation."""
+        if env_ids is None:
+            self.buffers = {}
+        elif self._fresh is not None:
             self._fresh[env_ids] = True
 
     def term_columns(self, env: TraversalEnv, group: str) -> list[str]:
@@ -124,9 +136,10 @@ class ObservationGroups:
         """Whether any group lists one of ``terms``."""
         return any(t in self.fns for t in terms)
 
-    def compute(self, env: TraversalEnv) -> TensorDict:
+    def compute(self, env: TraversalEnv, commit: bool = True) -> TensorDict:
         """Every group for all envs; each term evaluated once, its noise drawn once (at its first noisy group, in
-        group and term order) and shared by every noisy group."""
+        group and term order) and shared by every noisy group. ``commit=False``: the histories do not move on
+        (the deploy runtime's look at the observation between control steps)."""
         values: dict[str, torch.Tensor] = {}
         noisy_values: dict[str, torch.Tensor] = {}
         draws: dict[str, torch.Tensor] = {}  # U[0, 1) per noise source (a term, or the one it shares with)
@@ -138,22 +151,23 @@ class ObservationGroups:
                 if name not in values:
                     values[name] = self.fns[name](env)
                 value = values[name]
-                scale = getattr(noise, name, 0.0)
+                spec = self.terms[name].noise
+                scale = noise_scale(noise, name)
                 if self.noisy[group] and noise.enabled and scale > 0:
                     if name not in noisy_values:
-                        source = SHARED_NOISE.get(name, name)
+                        source = spec.shares or name
                         u = draws.get(source)
                         if u is None or u.shape != value.shape:
                             u = draws[source] = torch.rand(value.shape, device=value.device)
                         noisy_values[name] = _noisy(name, value, scale, u)
                     value = noisy_values[name]
                 parts.append(value)
-            out[group] = self._stack(group, torch.cat(parts, dim=-1))
-        if self._fresh is not None:
+            out[group] = self._stack(group, torch.cat(parts, dim=-1), commit)
+        if self._fresh is not None and commit:
             self._fresh[:] = False
         return TensorDict(out, batch_size=[env.num_envs], device=env.device)
 
-    def _stack(self, group: str, value: torch.Tensor) -> torch.Tensor:
+    def _stack(self, group: str, value: torch.Tensor, commit: bool = True) -> torch.Tensor:
         h = self.history[group]
         if h == 1:
             return value
@@ -166,7 +180,8 @@ class ObservationGroups:
             buf = torch.cat((buf[:, 1:], value[:, None]), dim=1)
             fresh = self._fresh
             buf[fresh] = value[fresh][:, None].expand(-1, h, -1)
-        self.buffers[group] = buf
+        if commit:
+            self.buffers[group] = buf
         return buf.flatten(1)
 
     def state_dict(self) -> dict[str, torch.Tensor]:
@@ -177,10 +192,15 @@ class ObservationGroups:
         self.buffers = {k: v.clone() for k, v in state.items()}
 
 
+def _flips(name: str) -> bool:
+    term = OBS_TERMS.get(name)
+    return term is not None and term.noise is not None and term.noise.kind == "flip"
+
+
 def noise_std(name: str, scale: float) -> float:
     """Std of the noise ``_noisy`` adds to term ``name`` at ``scale``: uniform U(-s, s) has s/sqrt(3); a flip with
     probability p of a {0, 1} cell changes it by +-1 with probability p, std sqrt(p(1 - p)) about its mean."""
-    if name in FLIP_NOISE_TERMS:
+    if _flips(name):
         return math.sqrt(scale * (1.0 - scale))
     return scale / math.sqrt(3.0)
 
@@ -188,26 +208,23 @@ def noise_std(name: str, scale: float) -> float:
 def _noisy(name: str, value: torch.Tensor, scale: float, u: torch.Tensor) -> torch.Tensor:
     """``value`` read with noise of ``scale`` from uniform draws ``u`` in [0, 1): U(-s, s) added, or cells
     flipped with probability s."""
-    if name in FLIP_NOISE_TERMS:
+    if _flips(name):
         return torch.where(u < scale, 1.0 - value, value)
     return value + scale * (2 * u - 1)
 
 
 def group_layout(task: EnvCfg, group: str = "actor") -> tuple:
     """What fixes a group's input width and meaning: its resolved terms, in order, whether the field block is
-    live, and the perception grid sizes of the map terms it lists (a checkpoint plays only on its own layout)."""
+    live, and the config its terms declare as fixing their width (``ObsTerm.layout``: perception grid sizes), in
+    declaration order (a checkpoint plays only on its own layout)."""
     terms = resolve_groups(task.observations).get(group, [])
     layout: tuple = (tuple(terms), bool(task.field_obs.enabled))
     history = task.observations[group].history if group in task.observations else 1
     if history > 1:
         layout += (("history", history),)
-    if {"elevation_map", "ground_map", "overhead_map"} & set(terms):
-        hm = task.perception.height_map
-        layout += (("height_map", hm.length, hm.width, hm.resolution, hm.forward_offset),)
-    if "voxel_grid" in terms:
-        vg = task.perception.voxel_grid
-        layout += (("voxel_grid", vg.length, vg.width, vg.height, vg.resolution, vg.forward_offset),)
-    return layout
+    listed = set(terms)
+    extra = [t.layout(task) for name, t in OBS_TERMS.items() if name in listed and t.layout is not None]
+    return layout + tuple(dict.fromkeys(extra))
 
 
 def groups_layout(task: EnvCfg, groups: list[str]) -> tuple:

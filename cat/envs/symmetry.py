@@ -2,7 +2,8 @@
 
 Mirroring is the reflection y -> -y of the world (the x-z plane of the robot's yaw frame). Every observation
 term and the 12 leg actions mirror by a column permutation and a sign, so a group mirrors as
-``x[:, perm] * sign``, built once from the env's term lists:
+``x[:, perm] * sign``, built once from the env's term lists and each term's declared ``mirror``
+(``cat.envs.mdp.observations``, built from ``cat.envs.mdp.mirror``):
 
 - polar vectors (gravity, goal, velocities, positions, field directions): (x, -y, z)
 - axial vectors (angular velocity): (-x, y, -z)
@@ -20,90 +21,37 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-import numpy as np
 import torch
 from tensordict import TensorDict
 
-from cat.envs.mdp.registry import OBS_TERMS
-from cat.envs.perception import map_shape, voxel_shape
+from cat.envs.mdp.mirror import AXIAL, POLAR, Mirror, grid_mirror, joint_mirror, mirror_name
+from cat.envs.mdp.registry import obs_term
 
 if TYPE_CHECKING:
     from cat.envs.traversal_env import TraversalEnv
 
-POLAR = ([0, 1, 2], [1.0, -1.0, 1.0])
-AXIAL = ([0, 1, 2], [-1.0, 1.0, -1.0])
+__all__ = [
+    "AXIAL",
+    "POLAR",
+    "MirrorMap",
+    "grid_mirror",
+    "joint_mirror",
+    "mirror_augment",
+    "mirror_name",
+    "mirror_state",
+    "term_mirror",
+]
 
 
-def mirror_name(name: str) -> str:
-    """``left_x`` <-> ``right_x``; other names map to themselves."""
-    if name.startswith("left_"):
-        return "right_" + name[5:]
-    if name.startswith("right_"):
-        return "left_" + name[6:]
-    return name
-
-
-def joint_mirror(names: list[str]) -> tuple[list[int], list[float]]:
-    """(perm, sign) over joints: mirrored[i] = sign[i] * q[perm[i]]; roll / yaw joints flip sign."""
-    perm = [names.index(mirror_name(n)) for n in names]
-    sign = [-1.0 if ("roll" in n or "yaw" in n) else 1.0 for n in names]
-    return perm, sign
-
-
-def _links(names: list[str], per_link: tuple[list[int], list[float]]) -> tuple[list[int], list[float]]:
-    """Mirror of a (K, d) link block flattened to K*d: links swap sides, each link's d values by ``per_link``."""
-    d = len(per_link[0])
-    perm, sign = [], []
-    for name in names:
-        k = names.index(mirror_name(name))
-        perm += [k * d + j for j in per_link[0]]
-        sign += per_link[1]
-    return perm, sign
-
-
-def grid_mirror(shape: tuple[int, ...], layers: int = 1) -> tuple[list[int], list[float]]:
-    """(perm, sign) of ``layers`` row-major grids of ``shape`` (along, across, ...): the across axis reverses."""
-    idx = np.arange(layers * int(np.prod(shape))).reshape((layers, *shape))
-    return np.flip(idx, axis=2).reshape(-1).tolist(), [1.0] * idx.size
-
-
-def term_mirror(env: TraversalEnv, term: str) -> tuple[list[int], list[float]]:
-    """(perm, sign) of one observation term's columns."""
-    joints = env.robot.joint_names
-    legs = [joints[i] for i in env.robot.policy_joint_ids]
-    links = [q.name for q in env.robot.query_links]
-    field = _links(links, ([0, 1, 2, 3, 4, 5, 6], [1.0, -1.0, 1.0, 1.0, -1.0, 1.0, 1.0]))
-    table = {
-        "gyro": AXIAL,
-        "projected_gravity": POLAR,
-        "joint_pos": joint_mirror(joints),
-        "joint_vel": joint_mirror(joints),
-        "last_action": joint_mirror(legs),
-        "leg_targets": joint_mirror(legs),
-        "goal_command": POLAR,
-        "gait_phase": ([0, 1], [-1.0, -1.0]),
-        "field_block": field,
-        "field_block_odometry": field,  # a mirrored drift (dx, -dy, -dyaw) is as likely: the walk is isotropic
-        "base_lin_vel": POLAR,
-        "base_height": ([0], [1.0]),
-        "link_positions": _links(links, POLAR),
-        "foot_contacts": ([1, 0], [1.0, 1.0]),
-        "dr_scales": ([0, 1, 2], [1.0, 1.0, 1.0]),
-        "scene_group": ([0], [1.0]),
-        "elevation_map": grid_mirror(map_shape(env.cfg.perception.height_map), layers=2),
-        "ground_map": grid_mirror(map_shape(env.cfg.perception.height_map)),
-        "overhead_map": grid_mirror(map_shape(env.cfg.perception.height_map)),
-        "voxel_grid": grid_mirror(voxel_shape(env.cfg.perception.voxel_grid)),
-    }
-    registered = OBS_TERMS.get(term)
-    if registered is not None and registered.mirror is not None:
-        return registered.mirror
-    if term not in table:
+def term_mirror(env: TraversalEnv, term: str) -> Mirror:
+    """(perm, sign) of one observation term's columns: its declaration's ``mirror`` (``cat.envs.mdp.terms``)."""
+    mirror = obs_term(term).mirror
+    if mirror is None:
         raise ValueError(
-            f"observation term {term!r} has no mirror map; add one in cat.envs.symmetry.term_mirror "
-            "(or register_observation(..., mirror=...))"
+            f"observation term {term!r} has no mirror map; declare one (observation_term / register_observation "
+            "mirror=...)"
         )
-    return table[term]
+    return mirror(env.cfg, env.robot)
 
 
 @dataclass

@@ -25,7 +25,7 @@ import math
 import torch
 from tensordict import TensorDict
 
-from cat.envs.obs_groups import noise_std
+from cat.envs.obs_groups import noise_scale, noise_std
 
 log = logging.getLogger(__name__)
 
@@ -114,7 +114,7 @@ def _constant_in_prior(env, model) -> torch.Tensor:
     for g in model.obs_groups:
         noisy = noise.enabled and bool(env.cfg.observations[g].noise)
         for term in env.observation_groups.term_columns(env, g):
-            floor.append(noise_std(term, float(getattr(noise, term, 0.0))) if noisy else 0.0)
+            floor.append(noise_std(term, noise_scale(noise, term)) if noisy else 0.0)
     floor = torch.tensor(floor).clamp_min(MIN_STD) * NOISE_MARGIN
     return model.obs_normalizer._std[0] <= floor
 

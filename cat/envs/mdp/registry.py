@@ -1,74 +1,56 @@
-"""Observation and reward terms added from outside the package, without editing it (docs/extending.md).
+"""The term registries, loaded: observation terms (``OBS_TERMS``, built-in and registered) and reward terms.
 
-``register_observation`` declares a term once: its function, its size (for the ONNX metadata), its mirror map
-(for symmetry) and a note. The observation groups (``cat.envs.obs_groups``), the mirror map
-(``cat.envs.symmetry``) and the export metadata (``cat.deploy.metadata``) read these beside the built-in terms.
+Every observation term is an ``ObsTerm`` declaration (``cat.envs.mdp.terms``): the built-in ones on their
+functions in ``cat.envs.mdp.observations`` (imported here, so importing this module loads them), terms from
+outside the package with ``register_observation`` (docs/extending.md). The observation groups
+(``cat.envs.obs_groups``), symmetry (``cat.envs.symmetry``), the export metadata (``cat.deploy.metadata``) and
+the deploy runtime (``cat.deploy.runtime``) read ``obs_term`` / ``OBS_TERMS`` only.
+
 ``register_reward`` adds a reward function; a run turns it on with a weight in ``task.rewards.extra``
-(``RewardCfg.extra``: name -> weight), so registering alone changes no env.
-
-Registered observation terms carry no observation noise and are not computed by the click demo's runtime
-(``cat.deploy.runtime.DEPLOYABLE_TERMS``). This is the extension point until the built-in terms move to one
-registry too (issue 29, deliverable 1); today a built-in term is still declared across several files.
+(``RewardCfg.extra``: name -> weight), so registering alone changes no env. Built-in reward terms are the
+functions of ``cat.envs.mdp.rewards`` with a float weight field in ``RewardCfg`` (their constants still share
+``RewardParamsCfg``: shipped config.yaml files record that layout).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass, fields
+from dataclasses import fields
 from typing import TYPE_CHECKING
 
-import torch
-
-from cat.envs.mdp import observations as obs_module
+from cat.envs.mdp import observations as _builtin_observations  # noqa: F401  (declares the built-in terms)
 from cat.envs.mdp import rewards as reward_module
+from cat.envs.mdp.terms import OBS_TERMS, ObsTerm, TermFn, TermNoise, observation_term, register_observation
 
 if TYPE_CHECKING:
-    from cat.envs.config import EnvCfg, RewardCfg
-    from cat.envs.robot import RobotCfg
-    from cat.envs.traversal_env import TraversalEnv
+    from cat.envs.config import RewardCfg
 
-TermFn = Callable[["TraversalEnv"], torch.Tensor]
-Mirror = tuple[list[int], list[float]]  # mirrored[:, i] = sign[i] * value[:, perm[i]] (cat.envs.symmetry)
+__all__ = [
+    "OBS_TERMS",
+    "REWARD_TERMS",
+    "ObsTerm",
+    "TermNoise",
+    "active_rewards",
+    "obs_term",
+    "observation_term",
+    "register_observation",
+    "register_reward",
+    "reward_fn",
+]
 
-
-@dataclass(frozen=True)
-class ObsTerm:
-    """A registered observation term: ``fn(env)`` -> (N, size)."""
-
-    fn: TermFn
-    size: Callable[[EnvCfg, RobotCfg], int]  # its width from the task and robot (export metadata)
-    mirror: Mirror | None = None  # None: a policy reading it cannot use symmetry augmentation
-    note: str = ""  # what it means, in the ONNX metadata
-
-
-OBS_TERMS: dict[str, ObsTerm] = {}
 REWARD_TERMS: dict[str, TermFn] = {}
+
+
+def obs_term(name: str) -> ObsTerm:
+    """The declaration of observation term ``name``, or ``ValueError`` naming it and listing the valid names."""
+    term = OBS_TERMS.get(name)
+    if term is None:
+        raise ValueError(f"unknown observation term {name!r}; valid: {', '.join(sorted(OBS_TERMS))}")
+    return term
 
 
 def _builtin(module, name: str) -> bool:
     fn = getattr(module, name, None)
     return callable(fn) and getattr(fn, "__module__", "") == module.__name__
-
-
-def register_observation(
-    name: str,
-    fn: TermFn,
-    size: int | Callable[[EnvCfg, RobotCfg], int],
-    mirror: Mirror | None = None,
-    note: str = "",
-) -> ObsTerm:
-    """Declare observation term ``name`` (listed in a group's ``terms`` like a built-in one). Registering the
-    same function again is a no-op; another function under a taken name is a ``ValueError``."""
-    size_fn = size if callable(size) else (lambda task, robot, n=int(size): n)
-    term = ObsTerm(fn, size_fn, mirror, note)
-    if _builtin(obs_module, name):
-        raise ValueError(f"observation term {name!r} is built in (cat.envs.mdp.observations)")
-    old = OBS_TERMS.get(name)
-    if old is not None and old.fn is not fn:
-        raise ValueError(f"observation term {name!r} is already registered (by {old.fn.__module__})")
-    if old is None:
-        OBS_TERMS[name] = term
-    return OBS_TERMS[name]
 
 
 def register_reward(name: str, fn: TermFn) -> None:

@@ -1,0 +1,137 @@
+"""Observation terms as declared objects: one ``ObsTerm`` per term holds everything the code knows about it.
+
+A term is a function ``fn(env) -> (N, size)`` plus its declaration (mjlab's pattern: a term is a function and a
+config): its width, how observation noise reads it, its left/right mirror map, whether a deployed robot can
+compute it, its clip and meaning (export metadata) and the config that fixes its width (checkpoint layouts).
+The observation groups (``cat.envs.obs_groups``), symmetry (``cat.envs.symmetry``), the export metadata
+(``cat.deploy.metadata``) and the deploy runtime (``cat.deploy.runtime``) all read ``OBS_TERMS``.
+
+Built-in terms are declared with ``@observation_term(...)`` on their function (``cat.envs.mdp.observations``);
+terms from outside the package with ``register_observation`` (the same registry). Consumers import
+``cat.envs.mdp.registry``, which loads the built-in ones. This module imports nothing from the env.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Literal
+
+import torch
+
+if TYPE_CHECKING:
+    from cat.envs.config import EnvCfg
+    from cat.envs.robot import RobotCfg
+    from cat.envs.traversal_env import TraversalEnv
+
+TermFn = Callable[["TraversalEnv"], torch.Tensor]
+Mirror = tuple[list[int], list[float]]  # mirrored[:, i] = sign[i] * value[:, perm[i]] (cat.envs.symmetry)
+SizeFn = Callable[["EnvCfg", "RobotCfg"], int]
+MirrorFn = Callable[["EnvCfg", "RobotCfg"], Mirror]
+
+
+@dataclass(frozen=True)
+class TermNoise:
+    """How observation noise reads a term in a group with ``noise: true``; the scale is config
+    (``NoiseCfg.<term>``, or ``NoiseCfg.extra[<term>]`` for a term without a field; zero: no noise).
+
+    ``uniform``: U(-s, s) added to every value. ``flip``: each {0, 1} value reads flipped with probability s.
+    ``shares``: another term whose draw this one reuses (one reading placed two ways, e.g. the field block at the
+    true links and at the links as the drifting odometry places them)."""
+
+    kind: Literal["uniform", "flip"] = "uniform"
+    shares: str | None = None
+
+
+@dataclass(frozen=True)
+class ObsTerm:
+    """One observation term: its function and everything the groups, symmetry, export and deploy read."""
+
+    fn: TermFn
+    size: SizeFn  # its width from the task and robot (export metadata; the tests check it against the env)
+    noise: TermNoise | None = None  # None: read without noise in every group
+    mirror: MirrorFn | None = None  # None: a policy reading it cannot use symmetry augmentation
+    deployable: bool = False  # a robot computes it (the deploy runtime refuses policies reading other terms)
+    clip: Callable[[EnvCfg], float] | None = None  # the term's own clip (export metadata; ``note`` says what)
+    layout: Callable[[EnvCfg], tuple] | None = None  # config that fixes its width / meaning (checkpoint layouts)
+    note: str = ""  # what it means, in the ONNX metadata
+
+
+OBS_TERMS: dict[str, ObsTerm] = {}
+"""Every observation term by name, the built-in ones first in declaration order (``cat.envs.mdp.registry``
+guarantees they are loaded)."""
+
+
+def _const_size(n: int) -> SizeFn:
+    return lambda task, robot: n
+
+
+def _const_mirror(m: Mirror) -> MirrorFn:
+    perm, sign = list(m[0]), [float(s) for s in m[1]]
+    return lambda task, robot: (perm, sign)
+
+
+def register_observation(
+    name: str,
+    fn: TermFn,
+    size: int | SizeFn,
+    mirror: Mirror | MirrorFn | None = None,
+    note: str = "",
+    *,
+    noise: TermNoise | None = None,
+    deployable: bool = False,
+    clip: Callable[[EnvCfg], float] | None = None,
+    layout: Callable[[EnvCfg], tuple] | None = None,
+) -> ObsTerm:
+    """Declare observation term ``name`` (listed by name in a group's ``terms``). ``size`` and ``mirror`` are
+    constants or functions of ``(task, robot)``. Registering the same function again is a no-op; another
+    function under a taken name is a ``ValueError``."""
+    old = OBS_TERMS.get(name)
+    if old is not None:
+        if old.fn is fn:
+            return old
+        owner = getattr(old.fn, "__module__", "?")
+        where = "built in (cat.envs.mdp.observations)" if owner == "cat.envs.mdp.observations" else f"by {owner}"
+        raise ValueError(f"observation term {name!r} is already registered {where}")
+    term = ObsTerm(
+        fn=fn,
+        size=size if callable(size) else _const_size(int(size)),
+        noise=noise,
+        mirror=mirror if (mirror is None or callable(mirror)) else _const_mirror(mirror),
+        deployable=deployable,
+        clip=clip,
+        layout=layout,
+        note=note,
+    )
+    OBS_TERMS[name] = term
+    return term
+
+
+def observation_term(
+    size: int | SizeFn,
+    *,
+    noise: TermNoise | None = None,
+    mirror: Mirror | MirrorFn | None = None,
+    deployable: bool = False,
+    clip: Callable[[EnvCfg], float] | None = None,
+    layout: Callable[[EnvCfg], tuple] | None = None,
+    note: str = "",
+) -> Callable[[TermFn], TermFn]:
+    """Decorator form of ``register_observation`` under the function's name (the built-in terms' declaration);
+    the function is returned unchanged."""
+
+    def declare(fn: TermFn) -> TermFn:
+        register_observation(
+            fn.__name__,
+            fn,
+            size,
+            mirror,
+            note,
+            noise=noise,
+            deployable=deployable,
+            clip=clip,
+            layout=layout,
+        )
+        return fn
+
+    return declare

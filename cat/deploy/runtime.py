@@ -6,9 +6,10 @@ noise: the stand-in for the paper's LiDAR-inertial odometry) and the live Humano
 (``cat.deploy.perception``). The observation groups the policy reads (``PolicySpec.obs_groups``: the actor, or
 a distilled student) are built by the env's own ``ObservationGroups`` (noise off: same terms, same history
 stacking) on a one-robot context, the field block by the same ``field_obs``, and actions go through the same
-``apply_actions``. Only terms declared ``deployable`` (``cat.envs.mdp.observations``) are computed. The policy is
-a checkpoint or an exported ONNX file (``cat.deploy.policy``); an ONNX file whose metadata differs from this
-runtime's layout is refused.
+``apply_actions``. Only terms declared ``deployable`` (``cat.envs.mdp.observations``) are computed; they read
+the env contract (``cat.envs.mdp.context.TermContext``), which this class provides. The policy is a checkpoint
+or an exported ONNX file (``cat.deploy.policy``); an ONNX file whose metadata differs from this runtime's layout
+is refused.
 """
 
 from __future__ import annotations

@@ -51,7 +51,8 @@ class ObsTerm:
     size: SizeFn  # its width from the task and robot (export metadata; the tests check it against the env)
     noise: TermNoise | None = None  # None: read without noise in every group
     mirror: MirrorFn | None = None  # None: a policy reading it cannot use symmetry augmentation
-    deployable: bool = False  # a robot computes it (the deploy runtime refuses policies reading other terms)
+    deployable: bool = False  # a robot computes it: reads only the TermContext (cat.envs.mdp.context); the deploy
+    # runtime refuses policies reading other terms
     clip: Callable[[EnvCfg], float] | None = None  # the term's own clip (export metadata; ``note`` says what)
     layout: Callable[[EnvCfg], tuple] | None = None  # config that fixes its width / meaning (checkpoint layouts)
     note: str = ""  # what it means, in the ONNX metadata

@@ -1,4 +1,5 @@
-"""Benchmarks: ``python scripts/bench.py sim|fields|train|eval|gen|scale|soak`` (extra args go to the case)."""
+"""Benchmarks: ``python scripts/bench.py sim|fields|field_contact|train|eval|gen|scale|soak|live`` (extra args go
+to the case)."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ import sys
 COMMANDS = {
     "sim": "cat.bench.sim",
     "fields": "cat.bench.fields",
+    "field_contact": "cat.bench.field_contact",
     "train": "cat.bench.train",
     "eval": "cat.bench.eval",
     "gen": "cat.bench.gen",

@@ -119,3 +119,27 @@ def test_body_points_packing_keeps_every_point_with_its_body():
     assert packed.body_start.tolist() == [0, 1, 3, 4] and packed.group_start.tolist() == [0, 5, 8, 10, 14]
     torch.testing.assert_close(packed.points[5:8], groups[0])
     torch.testing.assert_close(packed.cull, torch.tensor([0.2, 0.1, 0.3, 0.4]))
+
+
+def test_bench_field_contact_prints_its_lines(capsys):
+    """``scripts/bench.py field_contact`` at a tiny size: one line per (placement, impl), same contact fraction."""
+    import importlib.util
+    import re
+    from pathlib import Path
+
+    spec = importlib.util.spec_from_file_location("bench_script", Path(__file__).parents[1] / "scripts" / "bench.py")
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    args = ["field_contact", "--envs", "8", "--scenes", "2", "--warmup", "2", "--steps", "1", "--repeat", "1"]
+    assert bench.main(args) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    pattern = (
+        r"case=field_contact impl=(torch|fused) placement=(start|anywhere) envs=8 scenes=2 points=(\d+) "
+        r"contact_frac=([\d.]+) ms_per_step=([\d.]+) cpu_ms_per_step=([\d.]+)"
+    )
+    found = [re.fullmatch(pattern, line) for line in lines[-4:]]
+    assert all(found), lines
+    assert [(m.group(1), m.group(2)) for m in found] == [
+        ("torch", "start"), ("fused", "start"), ("torch", "anywhere"), ("fused", "anywhere")
+    ]  # fmt: skip
+    assert found[0].group(4) == found[1].group(4) and found[2].group(4) == found[3].group(4)

@@ -202,6 +202,13 @@ class FieldContact:
             cols.append(list(range(p.adr, p.adr + 3)) + list(range(q.adr, q.adr + 4)))
         self._cols = torch.tensor(cols, device=self.device)
 
+    @property
+    def pose_columns(self) -> torch.Tensor:
+        """(B, 7) sensordata columns of each body's position (3) and orientation (4)."""
+        if self._cols is None:
+            raise RuntimeError("FieldContact.sensor_columns was never called")
+        return self._cols
+
     def poses(self, sensordata: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(pos (n, B, 3), quat (n, B, 4)) of the bodies from sensor rows (n, nsensordata)."""
         if self._cols is None:

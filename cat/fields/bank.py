@@ -367,7 +367,13 @@ class FieldBank:
                 raise IndexError(f"field_idx out of range [0, {self.num_fields}): min {lo}, max {hi}")
         kernel = min_sdf_kernel(self._wp_scalar)
         scene_ptr, _, meta = self._pointers()
+        # worlds of one scene in a row (they read the same grid: cache hits on the CPU); on the CPU one thread per
+        # world (few thread starts), on CUDA one per (world, body)
+        order = torch.argsort(idx, stable=True).to(torch.int32)
+        per_thread = nb if self._wp_device.is_cpu else 1
         i32, f32, v3 = wp.int32, wp.float32, wp.vec3
+        world = [wp.from_torch(idx, dtype=i32)]
+        pose = [wp.from_torch(p, dtype=v3), wp.from_torch(q, dtype=wp.vec4), nb, per_thread]
         shared = [
             wp.from_torch(bodies.body_start, dtype=i32),
             wp.from_torch(bodies.group_start, dtype=i32),
@@ -375,25 +381,17 @@ class FieldBank:
             wp.from_torch(bodies.cull, dtype=f32),
             wp.from_torch(bodies.points, dtype=v3),
             int(cull),
+            wp.from_torch(out.view(-1), dtype=f32),
         ]
-        flat = out.view(-1)
 
-        def launch(e0: int, e1: int) -> None:
+        def launch(e0: int, e1: int) -> None:  # worlds order[e0:e1]
             if e1 <= e0:
                 return
+            items = (e1 - e0) * nb
             wp.launch(
                 kernel,
-                dim=(e1 - e0) * nb,
-                inputs=[
-                    scene_ptr,
-                    *meta[:5],
-                    wp.from_torch(idx[e0:e1], dtype=i32),
-                    wp.from_torch(p[e0 * nb : e1 * nb], dtype=v3),
-                    wp.from_torch(q[e0 * nb : e1 * nb], dtype=wp.vec4),
-                    nb,
-                    *shared,
-                    wp.from_torch(flat[e0 * nb : e1 * nb], dtype=f32),
-                ],
+                dim=-(-items // per_thread),
+                inputs=[scene_ptr, *meta[:5], *world, wp.from_torch(order[e0:e1], dtype=i32), *pose, items, *shared],
                 device=self._wp_device,
             )
 

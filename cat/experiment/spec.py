@@ -24,6 +24,7 @@ tables:
     methods: {Ours: [student], Specialists: {crouch-pass: [crouch]}}
     table1: {scene_seed: 0}
     trials_per_scene: 10     # also seed:, max_envs:, sim:
+    equal_budget: [Ours]     # rows that may differ only in method (check_equal_budget)
 ```
 
 Everything is checked on load (``ExperimentError``, one line naming the entry): unknown keys, a budget that is
@@ -89,6 +90,7 @@ class Table:
     seed: int = 0
     max_envs: int = 256
     sim: str = "mujoco"
+    equal_budget: list[str] = field(default_factory=list)  # rows that may differ only in method (one cell each)
 
     def references(self) -> list[str]:
         """Every checkpoint entry of its rows (cell names or paths)."""
@@ -233,7 +235,62 @@ def _table(name: str, raw: dict) -> Table:
             )
     if raw.get("table1") is None and raw.get("table2") is None:
         raise ExperimentError(f"{what}: needs table1: and/or table2:")
-    return Table(name=name, **raw)
+    rows = _as_list(f"{what}: equal_budget", raw.get("equal_budget"))
+    for row in rows:
+        if row not in raw["methods"]:
+            raise ExperimentError(f"{what}: equal_budget names {row!r}, not a row; rows: {', '.join(raw['methods'])}")
+    return Table(name=name, **{**raw, "equal_budget": [str(r) for r in rows]})
+
+
+EQUAL_KEYS = ("task", "algo", "init", "overrides", "iterations", "env_steps", "legs")
+"""What equal-budget rows share (their cells differ only in ``method``; seeds: one list's prefixes)."""
+
+
+def check_equal_budget(exp: Experiment, table: Table) -> None:
+    """The rows of ``table.equal_budget`` are one cell each, trained alike but for the method: same task (scenes,
+    curriculum), algo, init (prior), overrides, budget and legs, and seeds that are prefixes of one list (seed 0
+    for every row, more seeds for some); a minutes budget is no equal budget (machines differ). The trials are the
+    table's, the same for every row. One ``ExperimentError`` naming the row and the difference."""
+    what = f"table {table.name}: equal_budget"
+    cells: dict[str, Cell] = {}
+    for row in table.equal_budget:
+        entries = table.methods[row]
+        cell = exp.cell_of(entries[0]) if isinstance(entries, list) and len(entries) == 1 else None
+        if cell is None or cell[1] is not None:
+            raise ExperimentError(
+                f"{what}: row {row!r} must be one cell (one policy per method over every type), got {entries!r}"
+            )
+        cells[row] = exp.cells[cell[0]]
+        if cells[row].minutes is not None:
+            raise ExperimentError(f"{what}: row {row!r} (cell {cell[0]}) has a minutes budget; give env_steps")
+    if not cells:
+        return
+    longest = max((c.seeds for c in cells.values()), key=len)
+    for key in EQUAL_KEYS:
+        values = {row: _comparable_value(cell, key) for row, cell in cells.items()}
+        reprs = [repr(v) for v in values.values()]
+        usual = max(reprs, key=reprs.count)  # the value most rows have: the odd row out is named
+        others = [r for r, v in values.items() if repr(v) == usual]
+        for row, value in values.items():
+            if repr(value) != usual:
+                raise ExperimentError(
+                    f"{what}: row {row!r} (cell {cells[row].name}) differs from {', '.join(map(repr, others))} in "
+                    f"{key}: {value!r} vs {values[others[0]]!r}"
+                )
+    for row, cell in cells.items():
+        if cell.seeds != longest[: len(cell.seeds)]:
+            raise ExperimentError(
+                f"{what}: row {row!r} (cell {cell.name}) trains seeds {cell.seeds}, not a prefix of {longest}"
+            )
+
+
+def _comparable_value(cell: Cell, key: str):
+    value = getattr(cell, key)
+    if key == "overrides":
+        return sorted(value)
+    if key == "legs":
+        return [(leg.iterations, sorted(leg.overrides)) for leg in value]
+    return value
 
 
 def experiment_path(name: str) -> Path:
@@ -277,6 +334,7 @@ def load_experiment(name: str) -> Experiment:
         for ref in table.references():
             if ref != "hold":
                 _check_reference(exp, f"table {table.name}", ref)
+        check_equal_budget(exp, table)
     exp.stages()  # a cycle is an error now
     return exp
 

@@ -40,6 +40,7 @@ from cat.learning.finetune import (
     is_student_checkpoint,
     load_student_as_actor,
 )
+from cat.learning.layout_init import init_from_prior
 from cat.learning.precision import check_mixed_precision
 from cat.learning.progress import BudgetReached, install_iteration_hook, quiet_constructor
 from cat.learning.rerun_writer import prune_metrics
@@ -307,7 +308,7 @@ def _train_in(cfg: TrainCfg, env: TraversalEnv, run_dir: Path) -> Path:
         # the student knows its inputs: nothing to adapt (finetune.py)
         load_student_as_actor(runner, ckpt, cfg.init, cfg.algo.init_noise_std)
     elif cfg.init:
-        load_into_runner(runner, cfg.init, load_cfg={"actor": True, "critic": True})
+        init_from_prior(runner.alg, env, cfg.init)  # strict, or where the layouts agree (layout_init.py)
         runner.current_learning_iteration = 0
         adapt_to_new_inputs(runner.alg, env)  # inputs the prior never saw vary (warm_start.py)
         log.info("initialised weights from %s", cfg.init)

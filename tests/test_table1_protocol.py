@@ -1,0 +1,97 @@
+"""The Table I equal-budget protocol (configs/experiment/table1.yaml, docs/evaluation.md): every baseline row is
+trained like Ours but for its method, and each method's env reads and rewards what docs/baselines.md says."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import yaml
+
+from cat.experiment.plan import Plan
+from cat.experiment.spec import ExperimentError, load_experiment
+from cat.learning.hydra_cfg import load_config
+from cat.learning.runs import make_env
+
+ROWS = ["ASTraversal", "Humanoid Parkour", "Ours w/o OBS_field", "Ours w/o R_field", "Ours"]
+EXPERIMENT = Path(__file__).resolve().parents[1] / "configs" / "experiment" / "table1.yaml"
+
+
+def test_every_row_has_the_same_budget_scenes_prior_and_trials():
+    exp = load_experiment("table1")
+    table = exp.tables["table1"]
+    assert table.equal_budget == ROWS
+    assert list(table.methods)[:5] == ROWS and "Ours (specialists)" in table.methods
+    plan = Plan(exp, root="/nonexistent")
+    units = [u for u in plan.units.values() if u.cell.name in {table.methods[r][0] for r in ROWS}]
+    assert {u.iterations for u in units} == {1018}  # 25 M env steps at 1024 envs x 24 steps
+    assert {u.inputs["init"] for u in units} == {"checkpoints/flat/model_770.pt"}
+    seeds = {r: exp.cells[table.methods[r][0]].seeds for r in ROWS}
+    assert seeds["Ours"] == [0, 1] and seeds["Ours w/o OBS_field"] == [0, 1]
+    assert all(s == [0] for r, s in seeds.items() if r not in ("Ours", "Ours w/o OBS_field"))
+    methods = {exp.cells[table.methods[r][0]].method for r in ROWS}
+    assert methods == {"ours", "wo_obs_field", "wo_r_field", "astraversal", "humanoid_parkour"}
+
+
+def _variant(tmp_path, edit) -> str:
+    raw = yaml.safe_load(EXPERIMENT.read_text())
+    edit(raw)
+    path = tmp_path / "table1.yaml"
+    path.write_text(yaml.safe_dump(raw))
+    return str(path)
+
+
+@pytest.mark.parametrize(
+    ("edit", "message"),
+    [
+        (lambda r: r["cells"]["astraversal"].update(overrides=["task.scene_variants=5"]),
+         r"row 'ASTraversal' \(cell astraversal\) differs from .* in overrides"),
+        (lambda r: r["cells"]["wo_r_field"].update(env_steps=30_000_000),
+         r"row 'Ours w/o R_field' \(cell wo_r_field\) differs .* in env_steps: 30000000 vs 25000000"),
+        (lambda r: r["cells"]["humanoid_parkour"].update(init="checkpoints/flat/model_501.pt"),
+         r"row 'Humanoid Parkour' .* in init"),
+        (lambda r: r["cells"]["humanoid_parkour"].update(task="hurdle_pass"), r"row 'Humanoid Parkour' .* in task"),
+        (lambda r: r["cells"]["astraversal"].update(seeds=[1]), r"trains seeds \[1\], not a prefix of \[0, 1\]"),
+        (lambda r: (r["cells"]["ours"].pop("env_steps"), r["cells"]["ours"].update(minutes=60)),
+         r"row 'Ours' \(cell ours\) has a minutes budget"),
+        (lambda r: r["tables"]["table1"]["methods"].update({"Ours": {"hurdle-pass": ["ours"]}}),
+         r"row 'Ours' must be one cell"),
+        (lambda r: r["tables"]["table1"]["equal_budget"].append("Ours (generalist)"),
+         r"equal_budget names 'Ours \(generalist\)', not a row"),
+    ],
+)  # fmt: skip
+def test_a_row_that_differs_is_refused_naming_the_difference(tmp_path, edit, message):
+    with pytest.raises(ExperimentError, match=message):
+        load_experiment(_variant(tmp_path, edit))
+
+
+SHARED = ["gyro", "projected_gravity", "joint_pos", "joint_vel", "last_action", "leg_targets", "goal_command",
+          "gait_phase"]  # fmt: skip
+PRIVILEGED = ["base_lin_vel", "base_height", "link_positions", "foot_contacts", "dr_scales"]
+# docs/baselines.md, on the typical task (the episode ends at the first contact: collision 0 unless a method sets it)
+DOCUMENTED = {
+    "ours": (["field_block"], {"field_vmf": 0.2, "sdf_barrier": -2.0, "foot_sole_barrier": -2.0}, "field"),
+    "wo_obs_field": (["elevation_map"], {"field_vmf": 0.2, "sdf_barrier": -2.0, "foot_sole_barrier": -2.0}, "field"),
+    "wo_r_field": (["field_block"], {"collision": -20.0}, "straight"),
+    "astraversal": (["elevation_map"], {"map_clearance": -2.0}, "straight"),
+    "humanoid_parkour": (["ground_map", "overhead_map"], {"collision": -20.0}, "straight"),
+}
+METHOD_TERMS = {"field_vmf", "sdf_barrier", "foot_sole_barrier", "map_clearance", "collision"}
+
+
+@pytest.mark.parametrize("method", list(DOCUMENTED))
+def test_each_method_builds_the_documented_groups_and_rewards(tmp_path, method):
+    one_scene = ["task.scene_groups=[hurdle-crouch]", "task.scene_variants=1", "task.warmup_variants=0"]
+    cfg = load_config(["task=typical", f"method={method}", *one_scene, "num_envs=2", f"run_root={tmp_path}"])
+    env = make_env(cfg)
+    obs_terms, method_rewards, command = DOCUMENTED[method]
+    assert env.observation_groups.groups["actor"] == SHARED + obs_terms
+    assert env.observation_groups.groups["critic"] == SHARED + obs_terms + PRIVILEGED
+    assert {k: v for k, v in env.reward_weights.items() if k in METHOD_TERMS} == method_rewards
+    common = {k: v for k, v in env.reward_weights.items() if k not in METHOD_TERMS}
+    ours = {k: v for k, v in load_config(["task=typical"]).task.rewards.__dict__.items() if isinstance(v, float)}
+    assert common == {k: v for k, v in ours.items() if v != 0.0 and k not in METHOD_TERMS}
+    assert env.cfg.command.source == command
+    assert env.cfg.rewards.params.heading_gate == ("field" if command == "field" else "none")
+    obs = env.get_observations()
+    assert obs["actor"].shape == (2, len(env.observation_groups.term_columns(env, "actor")))

@@ -47,7 +47,7 @@ def example():
 
 def test_the_example_registers_its_terms(example):
     assert OBS_TERMS["time_left"].fn is example["time_left"]
-    assert REWARD_TERMS["pelvis_height"] is example["pelvis_height"]
+    assert REWARD_TERMS["pelvis_height"].fn is example["pelvis_height"]
     # registering the same term again is harmless; another function under the name is refused
     register_observation("time_left", example["time_left"], size=1, mirror=([0], [1.0]))
     with pytest.raises(ValueError, match="already registered"):

@@ -1,4 +1,5 @@
-"""The term registries, loaded: observation terms (``OBS_TERMS``, built-in and registered) and reward terms.
+"""The term registries, loaded: observation terms (``OBS_TERMS``) and reward terms (``REWARD_TERMS``), built-in
+and registered.
 
 Every observation term is an ``ObsTerm`` declaration (``cat.envs.mdp.terms``): the built-in ones on their
 functions in ``cat.envs.mdp.observations`` (imported here, so importing this module loads them), terms from
@@ -6,10 +7,11 @@ outside the package with ``register_observation`` (docs/extending.md). The obser
 (``cat.envs.obs_groups``), symmetry (``cat.envs.symmetry``), the export metadata (``cat.deploy.metadata``) and
 the deploy runtime (``cat.deploy.runtime``) read ``obs_term`` / ``OBS_TERMS`` only.
 
-``register_reward`` adds a reward function; a run turns it on with a weight in ``task.rewards.extra``
-(``RewardCfg.extra``: name -> weight), so registering alone changes no env. Built-in reward terms are the
-functions of ``cat.envs.mdp.rewards`` with a float weight field in ``RewardCfg`` (their constants still share
-``RewardParamsCfg``: shipped config.yaml files record that layout).
+Every reward term is a ``RewardTerm``: the built-in ones on their functions in ``cat.envs.mdp.rewards``, terms
+from outside with ``register_reward``. Their weights and constants are config: a built-in term's weight is its
+``RewardCfg`` field, a registered one's is in ``task.rewards.extra`` (so registering alone changes no env); the
+constants are ``RewardCfg.params`` fields, one shared dataclass because shipped config.yaml files record that
+layout. ``reward_terms`` gives the per-term view, name -> (weight, params).
 """
 
 from __future__ import annotations
@@ -19,7 +21,18 @@ from typing import TYPE_CHECKING
 
 from cat.envs.mdp import observations as _builtin_observations  # noqa: F401  (declares the built-in terms)
 from cat.envs.mdp import rewards as reward_module
-from cat.envs.mdp.terms import OBS_TERMS, ObsTerm, TermFn, TermNoise, observation_term, register_observation
+from cat.envs.mdp.terms import (
+    OBS_TERMS,
+    REWARD_TERMS,
+    ObsTerm,
+    RewardTerm,
+    TermFn,
+    TermNoise,
+    observation_term,
+    register_observation,
+    register_reward,
+    reward_term,
+)
 
 if TYPE_CHECKING:
     from cat.envs.config import RewardCfg
@@ -28,6 +41,7 @@ __all__ = [
     "OBS_TERMS",
     "REWARD_TERMS",
     "ObsTerm",
+    "RewardTerm",
     "TermNoise",
     "active_rewards",
     "obs_term",
@@ -35,9 +49,10 @@ __all__ = [
     "register_observation",
     "register_reward",
     "reward_fn",
+    "reward_params",
+    "reward_term",
+    "reward_terms",
 ]
-
-REWARD_TERMS: dict[str, TermFn] = {}
 
 
 def obs_term(name: str) -> ObsTerm:
@@ -48,35 +63,38 @@ def obs_term(name: str) -> ObsTerm:
     return term
 
 
-def _builtin(module, name: str) -> bool:
-    fn = getattr(module, name, None)
-    return callable(fn) and getattr(fn, "__module__", "") == module.__name__
-
-
-def register_reward(name: str, fn: TermFn) -> None:
-    """Declare reward term ``name``: ``fn(env)`` -> (N,) per control step, before its weight. A run turns it on
-    with ``task.rewards.extra.<name>=<weight>``."""
-    if _builtin(reward_module, name) or name in {f.name for f in _reward_weights()}:
-        raise ValueError(f"reward term {name!r} is built in (cat.envs.mdp.rewards)")
-    old = REWARD_TERMS.get(name)
-    if old is not None and old is not fn:
-        raise ValueError(f"reward term {name!r} is already registered (by {old.__module__})")
-    REWARD_TERMS[name] = fn
-
-
-def _reward_weights():
+def _builtin_rewards() -> list[str]:
+    """Built-in reward terms in ``RewardCfg``'s field order (the order the env sums them in); ``ValueError`` for a
+    field that is neither a declared term's weight nor a constant some term declares (it would be ignored)."""
     from cat.envs.config import RewardCfg
 
-    return [f for f in fields(RewardCfg) if f.type == "float"]
+    constants = {p for t in REWARD_TERMS.values() for p in t.params} | {"params", "extra"}
+    out = []
+    for f in fields(RewardCfg):
+        if _is_builtin(f.name):
+            out.append(f.name)
+        elif f.name not in constants:
+            raise ValueError(
+                f"RewardCfg.{f.name} is not a reward term declared in cat.envs.mdp.rewards (@reward_term) nor a "
+                "constant one declares"
+            )
+    return out
+
+
+def _is_builtin(name: str) -> bool:
+    term = REWARD_TERMS.get(name)
+    return term is not None and term.fn.__module__ == reward_module.__name__
 
 
 def active_rewards(cfg: RewardCfg) -> dict[str, float]:
     """Name -> weight of every reward term with a non-zero weight: the built-in ones in ``RewardCfg``'s field
     order, then ``cfg.extra`` (registered terms) in its order."""
-    out = {f.name: float(getattr(cfg, f.name)) for f in _reward_weights() if getattr(cfg, f.name) != 0.0}
+    out = {name: float(getattr(cfg, name)) for name in _builtin_rewards() if getattr(cfg, name) != 0.0}
     for name, weight in cfg.extra.items():
+        if _is_builtin(name):
+            raise ValueError(f"task.rewards.extra names built-in reward term {name!r}; set task.rewards.{name}")
         if name not in REWARD_TERMS:
-            valid = ", ".join(sorted(REWARD_TERMS)) or "none registered"
+            valid = ", ".join(sorted(n for n in REWARD_TERMS if not _is_builtin(n))) or "none registered"
             raise ValueError(f"task.rewards.extra names unknown reward term {name!r}; registered: {valid}")
         if weight != 0.0:
             out[name] = float(weight)
@@ -84,6 +102,17 @@ def active_rewards(cfg: RewardCfg) -> dict[str, float]:
 
 
 def reward_fn(name: str) -> TermFn:
-    """The function of reward term ``name``, looked up when called (the soak benchmark wraps the module's)."""
-    fn = REWARD_TERMS.get(name)
-    return fn if fn is not None else getattr(reward_module, name)
+    """The function of reward term ``name``, a built-in one looked up in its module when called (the soak
+    benchmark wraps the module's functions)."""
+    return getattr(reward_module, name) if _is_builtin(name) else REWARD_TERMS[name].fn
+
+
+def reward_params(cfg: RewardCfg, name: str) -> dict:
+    """The constants reward term ``name`` reads, by name: ``cfg.params.<p>``, or ``cfg.<p>`` for the few kept
+    beside the weights (``field_vmf_uniform_offset``)."""
+    return {p: getattr(cfg.params, p) if hasattr(cfg.params, p) else getattr(cfg, p) for p in REWARD_TERMS[name].params}
+
+
+def reward_terms(cfg: RewardCfg) -> dict[str, tuple[float, dict]]:
+    """Name -> (weight, params) of every active reward term, in the order the env sums them."""
+    return {name: (weight, reward_params(cfg, name)) for name, weight in active_rewards(cfg).items()}

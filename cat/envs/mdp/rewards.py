@@ -1,4 +1,6 @@
-"""Reward terms (per control step, before weighting). Weights live in ``RewardCfg``; the name matches."""
+"""Reward terms (per control step, before weighting), each declared with the constants it reads
+(``@reward_term(params=...)``, ``cat.envs.mdp.terms``). Weights live in ``RewardCfg`` (the name matches), the
+constants in ``RewardCfg.params``: config, recorded in every run's config.yaml."""
 
 from __future__ import annotations
 
@@ -8,6 +10,7 @@ from typing import TYPE_CHECKING
 import torch
 import torch.nn.functional as F
 
+from cat.envs.mdp.terms import reward_term
 from cat.fields import field_reward
 
 LOG_4PI = math.log(4 * math.pi)
@@ -16,6 +19,7 @@ if TYPE_CHECKING:
     from cat.envs.traversal_env import TraversalEnv
 
 
+@reward_term(params=("field_vmf_uniform_offset",))
 def field_vmf(env: TraversalEnv) -> torch.Tensor:
     """R_field = sum_k [log C_3(kappa_k) + kappa_k mu_k . v_k/|v_k|] (paper, eq. R_field), plus K log 4 pi.
 
@@ -30,6 +34,7 @@ def field_vmf(env: TraversalEnv) -> torch.Tensor:
     return r
 
 
+@reward_term(params=("velocity_sigma",))
 def track_velocity(env: TraversalEnv) -> torch.Tensor:
     """Root horizontal velocity tracks the field command (speed along F_H at the root)."""
     err = (env.state.root_lin_vel[:, :2] - env.command_vel).square().sum(dim=-1)
@@ -55,6 +60,7 @@ def heading_gate(name: str):
     return HEADING_GATES[name]
 
 
+@reward_term(params=("standing_speed", "heading_gate", "heading_clearance"))
 def track_heading(env: TraversalEnv) -> torch.Tensor:
     """Face the commanded direction in open space; 1 (free) near obstacles, where side-stepping may be needed.
 
@@ -71,30 +77,37 @@ def track_heading(env: TraversalEnv) -> torch.Tensor:
     return torch.where(active, cos, torch.ones_like(cos))
 
 
+@reward_term(params=("proximity_scale",))
 def goal_proximity(env: TraversalEnv) -> torch.Tensor:
     return torch.exp(-env.goal_distance / env.cfg.rewards.params.proximity_scale)
 
 
+@reward_term()
 def alive(env: TraversalEnv) -> torch.Tensor:
     return torch.ones(env.num_envs, device=env.device)
 
 
+@reward_term()
 def orientation(env: TraversalEnv) -> torch.Tensor:
     return env.state.gravity[:, :2].square().sum(dim=-1)
 
 
+@reward_term()
 def lin_vel_z(env: TraversalEnv) -> torch.Tensor:
     return env.state.root_lin_vel[:, 2].square()
 
 
+@reward_term()
 def ang_vel_xy(env: TraversalEnv) -> torch.Tensor:
     return env.state.gyro[:, :2].square().sum(dim=-1)
 
 
+@reward_term()
 def action_rate(env: TraversalEnv) -> torch.Tensor:
     return (env.actions - env.prev_actions).square().sum(dim=-1)
 
 
+@reward_term()
 def torques(env: TraversalEnv) -> torch.Tensor:
     """PD torque estimate kp (q* - q) - kd qdot on the policy joints."""
     ids = env.policy_ids
@@ -105,6 +118,7 @@ def torques(env: TraversalEnv) -> torch.Tensor:
     return tau.square().sum(dim=-1)
 
 
+@reward_term()
 def joint_limits(env: TraversalEnv) -> torch.Tensor:
     q = env.state.joint_pos
     return ((env.soft_lower - q).clamp_min(0) + (q - env.soft_upper).clamp_min(0)).sum(dim=-1)
@@ -119,11 +133,21 @@ def _stance(env: TraversalEnv) -> torch.Tensor:
     return stance | standing[:, None]
 
 
+@reward_term(params=("standing_speed",))
 def feet_phase_contact(env: TraversalEnv) -> torch.Tensor:
     """+1 per foot whose floor contact matches the gait clock."""
     return (env.state.foot_contact == _stance(env)).float().sum(dim=-1)
 
 
+@reward_term(
+    params=(
+        "standing_speed",
+        "foot_clearance",
+        "foot_clearance_min_only",
+        "foot_clearance_lookahead",
+        "foot_clearance_step_max",
+    )
+)
 def feet_clearance(env: TraversalEnv) -> torch.Tensor:
     """Swing feet should lift to ``params.foot_clearance`` (weighted by their horizontal speed); with
     ``params.foot_clearance_min_only`` only a foot below it is penalised (higher is free: hurdles).
@@ -152,22 +176,26 @@ def feet_clearance(env: TraversalEnv) -> torch.Tensor:
     return (error.square() * speed * swing).sum(dim=-1)
 
 
+@reward_term()
 def feet_slip(env: TraversalEnv) -> torch.Tensor:
     return (env.state.foot_vel[..., :2].square().sum(dim=-1) * env.state.foot_contact).sum(dim=-1)
 
 
+@reward_term(params=("knee_min",))
 def knee_straight(env: TraversalEnv) -> torch.Tensor:
     """Penalise nearly straight knees (locked knees make stepping brittle)."""
     knees = env.state.joint_pos[:, env.knee_ids]
     return (env.cfg.rewards.params.knee_min - knees).clamp_min(0).sum(dim=-1)
 
 
+@reward_term(params=("barrier_margin", "barrier_width"))
 def sdf_barrier(env: TraversalEnv) -> torch.Tensor:
     """Soft barrier on the signed distance at the query links: sum_k softplus((margin - d_k) / width)."""
     p = env.cfg.rewards.params
     return F.softplus((p.barrier_margin - env.field.sdf) / p.barrier_width).sum(dim=-1)
 
 
+@reward_term(params=("sole_margin", "barrier_width"))
 def foot_sole_barrier(env: TraversalEnv) -> torch.Tensor:
     """``sdf_barrier`` at each foot's heel and toe (``RobotCfg.foot_sole`` along the foot's x axis), with margin
     ``params.sole_margin``: the sole is ~20 cm long, so a foot landing on a bar or tripping on it touches with a
@@ -183,6 +211,7 @@ def foot_sole_barrier(env: TraversalEnv) -> torch.Tensor:
     return F.softplus((p.sole_margin - sdf) / p.barrier_width).sum(dim=-1)
 
 
+@reward_term(params=("barrier_margin", "barrier_width"))
 def map_clearance(env: TraversalEnv) -> torch.Tensor:
     """ASTraversal-style obstacle avoidance on the elevation map (no HumanoidPF), summed over the 13 links:
 
@@ -200,10 +229,12 @@ def map_clearance(env: TraversalEnv) -> torch.Tensor:
     return (below + above).sum(dim=-1)
 
 
+@reward_term()
 def collision(env: TraversalEnv) -> torch.Tensor:
     return env.state.collision.float()
 
 
+@reward_term()
 def termination(env: TraversalEnv) -> torch.Tensor:
     """1 on a failure termination (not a timeout)."""
     return env.failed.float()

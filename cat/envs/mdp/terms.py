@@ -1,4 +1,5 @@
-"""Observation terms as declared objects: one ``ObsTerm`` per term holds everything the code knows about it.
+"""Terms as declared objects: one ``ObsTerm`` per observation term holds everything the code knows about it; one
+``RewardTerm`` per reward term names the constants it reads.
 
 A term is a function ``fn(env) -> (N, size)`` plus its declaration (mjlab's pattern: a term is a function and a
 config): its width, how observation noise reads it, its left/right mirror map, whether a deployed robot can
@@ -7,7 +8,9 @@ The observation groups (``cat.envs.obs_groups``), symmetry (``cat.envs.symmetry`
 (``cat.deploy.metadata``) and the deploy runtime (``cat.deploy.runtime``) all read ``OBS_TERMS``.
 
 Built-in terms are declared with ``@observation_term(...)`` on their function (``cat.envs.mdp.observations``);
-terms from outside the package with ``register_observation`` (the same registry). Consumers import
+terms from outside the package with ``register_observation`` (the same registry). Reward terms likewise:
+``@reward_term(...)`` in ``cat.envs.mdp.rewards``, ``register_reward`` from outside; their weights and constants
+are config (``RewardCfg``; ``cat.envs.mdp.registry.reward_terms`` gives name -> (weight, params)). Consumers import
 ``cat.envs.mdp.registry``, which loads the built-in ones. This module imports nothing from the env.
 """
 
@@ -133,6 +136,46 @@ def observation_term(
             clip=clip,
             layout=layout,
         )
+        return fn
+
+    return declare
+
+
+@dataclass(frozen=True)
+class RewardTerm:
+    """One reward term: ``fn(env)`` -> (N,) per control step, before its weight (``RewardCfg.<name>``, or
+    ``RewardCfg.extra[<name>]`` for a registered term), and the names of the constants it reads
+    (``RewardCfg.params.<name>``, or a field of ``RewardCfg`` itself)."""
+
+    fn: TermFn
+    params: tuple[str, ...] = ()
+    note: str = ""
+
+
+REWARD_TERMS: dict[str, RewardTerm] = {}
+"""Every reward term by name, the built-in ones first in declaration order."""
+
+
+def register_reward(name: str, fn: TermFn, params: tuple[str, ...] = (), note: str = "") -> RewardTerm:
+    """Declare reward term ``name``. A run turns a registered one on with ``task.rewards.extra.<name>=<weight>``.
+    Registering the same function again is a no-op; another function under a taken name is a ``ValueError``."""
+    old = REWARD_TERMS.get(name)
+    if old is not None:
+        if old.fn is fn:
+            return old
+        owner = getattr(old.fn, "__module__", "?")
+        if owner == "cat.envs.mdp.rewards":
+            raise ValueError(f"reward term {name!r} is built in (cat.envs.mdp.rewards)")
+        raise ValueError(f"reward term {name!r} is already registered (by {owner})")
+    term = REWARD_TERMS[name] = RewardTerm(fn, tuple(params), note)
+    return term
+
+
+def reward_term(params: tuple[str, ...] = (), note: str = "") -> Callable[[TermFn], TermFn]:
+    """Decorator form of ``register_reward`` under the function's name (the built-in terms' declaration)."""
+
+    def declare(fn: TermFn) -> TermFn:
+        register_reward(fn.__name__, fn, params, note)
         return fn
 
     return declare

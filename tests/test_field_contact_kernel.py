@@ -100,6 +100,26 @@ def test_random_poses_judge_the_same(typical_env, dtype):
     assert torch.isinf(fused).any() and torch.isfinite(fused).any()
 
 
+def test_thread_layouts_and_cpu_splits_give_the_same_result(typical_env):
+    """One thread per world (the CPU default) or per (world, body) (the CUDA default), in one launch or two."""
+    env = typical_env
+    fc, bank = env.field_contact, env.field_source.bank
+    g = torch.Generator().manual_seed(5)
+    idx = torch.randint(0, bank.num_fields, (300,), generator=g)
+    pos, quat = random_poses(bank, idx, len(fc.bodies), g)
+    packed = fc.body_points(bank.device)
+    threads = bank.num_threads
+    try:
+        results = []
+        for n_threads in (1, 2):
+            bank.num_threads = n_threads
+            results += [bank.min_sdf_on_bodies(idx, pos, quat, packed, thread_per_body=t) for t in (False, True)]
+    finally:
+        bank.num_threads = threads
+    for r in results[1:]:
+        assert torch.equal(r, results[0])
+
+
 def test_rollout_judges_the_same(typical_env):
     """Random actions from the episode starts: every control step, the env's sensors, both judgements."""
     env = typical_env
@@ -134,12 +154,13 @@ def test_bench_field_contact_prints_its_lines(capsys):
     assert bench.main(args) == 0
     lines = capsys.readouterr().out.strip().splitlines()
     pattern = (
-        r"case=field_contact impl=(torch|fused) placement=(start|anywhere) envs=8 scenes=2 points=(\d+) "
+        r"case=field_contact impl=(torch|fused) placement=(start|anywhere|course) envs=8 scenes=2 points=(\d+) "
         r"contact_frac=([\d.]+) ms_per_step=([\d.]+) cpu_ms_per_step=([\d.]+)"
     )
-    found = [re.fullmatch(pattern, line) for line in lines[-4:]]
+    found = [re.fullmatch(pattern, line) for line in lines[-6:]]
     assert all(found), lines
     assert [(m.group(1), m.group(2)) for m in found] == [
-        ("torch", "start"), ("fused", "start"), ("torch", "anywhere"), ("fused", "anywhere")
-    ]  # fmt: skip
-    assert found[0].group(4) == found[1].group(4) and found[2].group(4) == found[3].group(4)
+        (impl, place) for place in ("start", "anywhere", "course") for impl in ("torch", "fused")
+    ]
+    for torch_line, fused_line in zip(found[::2], found[1::2], strict=True):  # the same judgement
+        assert torch_line.group(4) == fused_line.group(4)

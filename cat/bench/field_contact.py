@@ -1,14 +1,15 @@
 """``scripts/bench.py field_contact``: cost of the ``sim.obstacles=field`` contact judgement per env step.
 
-Builds a ``field``-mode env of ``--envs`` worlds over ``--scenes`` typical scenes, steps it with random actions
-(``--warmup`` control steps, robots fall near their starts) and keeps the sensor rows of the last ``--steps``
-steps. Two pose sets are timed: ``start`` (those rows as they are: robots near their episode starts, most
-collision geoms culled) and ``anywhere`` (each robot moved rigidly to a uniform spot of its scene's grid box:
-many bodies in or near obstacles, the expensive case). For each, ``FieldContact.judge`` runs with the torch
-reference (``impl=torch``: torch transforms + ``FieldBank.query`` per point) and the fused Warp kernel
-(``impl=fused``).
+Builds a ``field``-mode env of ``--envs`` worlds over ``--scenes`` typical scenes (the eight kinds in turn, or
+``--kind``'s), steps it with random actions (``--warmup`` control steps, robots fall near their starts) and keeps
+the sensor rows of the last ``--steps`` steps. Three pose sets are timed, each robot moved rigidly (its pose
+stays a real one): ``start`` (the rows as they are: robots near their episode starts, most collision geoms
+culled), ``anywhere`` (root at a uniform spot of its scene's grid box) and ``course`` (root x 0.1-1.9 m past the
+typical start line, |y| <= 0.3 m: among the obstacles, most robots in contact, the worst case). For each,
+``FieldContact.judge`` runs with the torch reference (``impl=torch``: torch transforms + ``FieldBank.query`` per
+point) and the fused Warp kernel (``impl=fused``), taking turns call by call.
 
-Prints one line per (placement, impl): ``case=field_contact impl=<torch|fused> placement=<start|anywhere>
+Prints one line per (placement, impl): ``case=field_contact impl=<torch|fused> placement=<start|anywhere|course>
 envs=<n> scenes=<n> points=<n> contact_frac=<x> ms_per_step=<x> cpu_ms_per_step=<x>`` (medians over steps ×
 ``--repeat``; wall clock, and the process's CPU time, which a busy machine inflates less).
 """
@@ -27,12 +28,15 @@ from cat.envs.config import EnvCfg
 from cat.envs.field_contact import FieldContact
 from cat.envs.scene_set import SceneSet, scene_fields
 from cat.envs.traversal_env import TraversalEnv
+from cat.terrain import TYPICAL_KINDS, make_typical
 
 log = logging.getLogger(__name__)
 IMPLS = ("torch", "fused")
-PLACEMENTS = ("start", "anywhere")
+PLACEMENTS = ("start", "anywhere", "course")
 EDGE = 0.3
 """m: robots placed ``anywhere`` keep their root this far inside the grid box (in x and y)."""
+COURSE_X = (0.6, 2.4)
+"""m past the grid box's low x (-0.5 m in a typical scene): root x 0.1-1.9 m, among the obstacles."""
 
 
 def snapshots(env: TraversalEnv, warmup: int, steps: int, seed: int) -> list[torch.Tensor]:
@@ -46,13 +50,22 @@ def snapshots(env: TraversalEnv, warmup: int, steps: int, seed: int) -> list[tor
     return out
 
 
-def moved_anywhere(fc: FieldContact, sens: torch.Tensor, bank, idx: torch.Tensor, g: torch.Generator) -> torch.Tensor:
-    """``sens`` with every robot's body positions shifted by one xy offset per world, to a uniform root spot in
-    its field's grid box (a rigid move: the pose stays a real one)."""
+def moved(
+    fc: FieldContact, sens: torch.Tensor, bank, idx: torch.Tensor, placement: str, g: torch.Generator
+) -> torch.Tensor:
+    """``sens`` with every robot's body positions shifted by one xy offset per world (a rigid move), its root to a
+    uniform spot of ``placement`` (``anywhere`` / ``course``, see the module docstring) in its field's grid box."""
+    if placement == "start":
+        return sens
     cols = fc.pose_columns[:, :3]
     pos = sens[:, cols]  # (n, B, 3)
     lo, hi = bank.field_bounds(idx)
-    target = lo[:, :2] + EDGE + torch.rand(len(idx), 2, generator=g) * (hi[:, :2] - lo[:, :2] - 2 * EDGE)
+    u = torch.rand(len(idx), 2, generator=g)
+    if placement == "anywhere":
+        target = lo[:, :2] + EDGE + u * (hi[:, :2] - lo[:, :2] - 2 * EDGE)
+    else:
+        x = lo[:, 0] + COURSE_X[0] + u[:, 0] * (COURSE_X[1] - COURSE_X[0])
+        target = torch.stack((x, 0.5 * (lo[:, 1] + hi[:, 1]) + 0.6 * (u[:, 1] - 0.5)), dim=1)
     shift = torch.zeros(len(idx), 1, 3)
     shift[:, 0, :2] = target - pos[:, 0, :2]
     out = sens.clone()
@@ -60,37 +73,49 @@ def moved_anywhere(fc: FieldContact, sens: torch.Tensor, bank, idx: torch.Tensor
     return out
 
 
-def time_judge(fc: FieldContact, rows: list[torch.Tensor], bank, idx: torch.Tensor, repeat: int) -> tuple[float, ...]:
-    """(median wall ms, median process CPU ms per ``judge`` call, fraction of worlds in contact) over ``rows`` ×
-    ``repeat``. CPU time counts every thread's work and not the time other processes hold the cores."""
-    fc.judge(rows[0], bank, idx)  # warm-up: kernel load, allocations
-    wall, cpu, hits = [], [], []
+def time_judge(
+    fc: FieldContact, rows: list[torch.Tensor], bank, idx: torch.Tensor, impls: tuple[str, ...], repeat: int
+) -> dict[str, tuple[float, float, float]]:
+    """Per impl: (median wall ms, median process CPU ms per ``judge`` call, fraction of worlds in contact) over
+    ``rows`` × ``repeat``. The impls take turns call by call, so a load that varies (a busy machine) falls on both
+    alike; CPU time counts every thread's work and not the time other processes hold the cores."""
+    wall, cpu, hits = ({i: [] for i in impls} for _ in range(3))
+    for i in impls:  # warm-up: kernel load, allocations
+        fc.fused = i == "fused"
+        fc.judge(rows[0], bank, idx)
     for _ in range(repeat):
         for sens in rows:
-            t0, c0 = time.perf_counter(), time.process_time()
-            collision, _ = fc.judge(sens, bank, idx)
-            wall.append((time.perf_counter() - t0) * 1e3)
-            cpu.append((time.process_time() - c0) * 1e3)
-            hits.append(float(collision.float().mean()))
-    return float(np.median(wall)), float(np.median(cpu)), float(np.mean(hits))
+            for i in impls:
+                fc.fused = i == "fused"
+                t0, c0 = time.perf_counter(), time.process_time()
+                collision, _ = fc.judge(sens, bank, idx)
+                wall[i].append((time.perf_counter() - t0) * 1e3)
+                cpu[i].append((time.process_time() - c0) * 1e3)
+                hits[i].append(float(collision.float().mean()))
+    fc.fused = True
+    return {i: (float(np.median(wall[i])), float(np.median(cpu[i])), float(np.mean(hits[i]))) for i in impls}
 
 
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="bench.py field_contact", description=__doc__)
     parser.add_argument("--envs", type=int, default=1024)
     parser.add_argument("--scenes", type=int, default=16, help="typical scenes (the eight kinds in turn)")
+    parser.add_argument("--kind", choices=TYPICAL_KINDS, default=None, help="only this typical kind")
     parser.add_argument("--warmup", type=int, default=20, help="random-action control steps before the snapshots")
     parser.add_argument("--steps", type=int, default=5, help="snapshots timed")
     parser.add_argument("--repeat", type=int, default=2)
     parser.add_argument("--impl", choices=(*IMPLS, "both"), default="both")
-    parser.add_argument("--placement", choices=(*PLACEMENTS, "both"), default="both")
+    parser.add_argument("--placement", choices=(*PLACEMENTS, "all"), default="all")
     parser.add_argument("--torch-threads", type=int, default=1)
     parser.add_argument("--bank-threads", type=int, default=None, help="concurrent CPU launches (bank default)")
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.WARNING)
     torch.set_num_threads(args.torch_threads)
-    scenes = typical_scenes(args.scenes, args.seed)
+    if args.kind is None:
+        scenes = typical_scenes(args.scenes, args.seed)
+    else:  # difficulties spread over [0, 1]
+        scenes = [make_typical(args.kind, i / max(args.scenes - 1, 1), args.seed + i) for i in range(args.scenes)]
     sset = SceneSet(scenes, lambda i: scene_fields(scenes[i], None, None), args.envs, per_world=True)
     env = TraversalEnv(EnvCfg(num_envs=args.envs), scenes=sset, seed=args.seed, obstacles="field")
     fc, bank, idx = env.field_contact, env.field_source.bank, env.field_source.field_idx
@@ -98,14 +123,13 @@ def main(argv: list[str] | None = None) -> None:
         bank.num_threads = max(1, args.bank_threads)
     rows = snapshots(env, args.warmup, args.steps, args.seed)
     g = torch.Generator().manual_seed(args.seed + 1)
-    sets = {"start": rows, "anywhere": [moved_anywhere(fc, r, bank, idx, g) for r in rows]}
-    for placement in PLACEMENTS if args.placement == "both" else (args.placement,):
-        for impl in IMPLS if args.impl == "both" else (args.impl,):
-            fc.fused = impl == "fused"
-            ms, cpu_ms, frac = time_judge(fc, sets[placement], bank, idx, args.repeat)
+    places = PLACEMENTS if args.placement == "all" else (args.placement,)
+    sets = {p: [moved(fc, r, bank, idx, p, g) for r in rows] for p in places}
+    impls = IMPLS if args.impl == "both" else (args.impl,)
+    for placement in places:
+        for impl, (ms, cpu_ms, frac) in time_judge(fc, sets[placement], bank, idx, impls, args.repeat).items():
             print(
                 f"case=field_contact impl={impl} placement={placement} envs={args.envs} scenes={len(scenes)} "
                 f"points={fc.num_points} contact_frac={frac:.3f} ms_per_step={ms:.2f} cpu_ms_per_step={cpu_ms:.2f}",
                 flush=True,
             )
-    fc.fused = True

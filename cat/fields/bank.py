@@ -344,13 +344,20 @@ class FieldBank:
         return out
 
     def min_sdf_on_bodies(
-        self, field_idx: torch.Tensor, pos: torch.Tensor, quat: torch.Tensor, bodies: BodyPoints, cull: bool = True
+        self,
+        field_idx: torch.Tensor,
+        pos: torch.Tensor,
+        quat: torch.Tensor,
+        bodies: BodyPoints,
+        cull: bool = True,
+        thread_per_body: bool | None = None,
     ) -> torch.Tensor:
         """(N, B) smallest d over each body's points of ``bodies``, posed by ``pos`` (N, B, 3) and unit ``quat``
         (N, B, 4; w, x, y, z), in fields ``field_idx`` (N,): one fused kernel (:mod:`cat.fields.body_points`).
 
         +inf where every point of the body lies outside its grid box or in a culled group (``cull=False``: none
-        is culled). Interpolation and out-of-grid rule are :meth:`query`'s."""
+        is culled). Interpolation and out-of-grid rule are :meth:`query`'s. ``thread_per_body``: one kernel thread
+        per (world, body) instead of per world (default: on CUDA only; the result is the same)."""
         self._check_ready()
         n, nb = pos.shape[:2]
         if pos.shape != (n, bodies.num_bodies, 3) or quat.shape != (n, nb, 4) or field_idx.shape != (n,):
@@ -370,10 +377,10 @@ class FieldBank:
         # worlds of one scene in a row (they read the same grid: cache hits on the CPU); on the CPU one thread per
         # world (few thread starts), on CUDA one per (world, body)
         order = torch.argsort(idx, stable=True).to(torch.int32)
-        per_thread = nb if self._wp_device.is_cpu else 1
+        split = int(self._wp_device.is_cuda if thread_per_body is None else thread_per_body)
         i32, f32, v3 = wp.int32, wp.float32, wp.vec3
         world = [wp.from_torch(idx, dtype=i32)]
-        pose = [wp.from_torch(p, dtype=v3), wp.from_torch(q, dtype=wp.vec4), nb, per_thread]
+        pose = [wp.from_torch(p, dtype=v3), wp.from_torch(q, dtype=wp.vec4), nb, split]
         shared = [
             wp.from_torch(bodies.body_start, dtype=i32),
             wp.from_torch(bodies.group_start, dtype=i32),
@@ -387,11 +394,10 @@ class FieldBank:
         def launch(e0: int, e1: int) -> None:  # worlds order[e0:e1]
             if e1 <= e0:
                 return
-            items = (e1 - e0) * nb
             wp.launch(
                 kernel,
-                dim=-(-items // per_thread),
-                inputs=[scene_ptr, *meta[:5], *world, wp.from_torch(order[e0:e1], dtype=i32), *pose, items, *shared],
+                dim=(e1 - e0) * (nb if split else 1),
+                inputs=[scene_ptr, *meta[:5], *world, wp.from_torch(order[e0:e1], dtype=i32), *pose, *shared],
                 device=self._wp_device,
             )
 

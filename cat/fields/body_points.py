@@ -102,25 +102,41 @@ def min_sdf_kernel(scalar: type) -> wp.Kernel:
         s11 = gz * float(sd[b + o1 + o2][0]) + fz * float(sd[b + o1 + o2 + o3][0])
         return gx * (gy * s00 + fy * s01) + fx * (gy * s10 + fy * s11)
 
-    @wp.func
-    def body_min(
+    @wp.kernel(module="unique")
+    def min_sdf(
         scene_ptr: wp.uint64,
         scene_offset: wp.array(dtype=wp.int64),
         scene_shape: wp.array(dtype=wp.vec3i),
         scene_origin: wp.array(dtype=wp.vec3),
         scene_inv_voxel: wp.array(dtype=wp.float32),
-        s: int,
-        pos: wp.vec3,
-        q: wp.vec4,
-        g0: int,
-        g1: int,
+        field_scene: wp.array(dtype=wp.int32),
+        field_idx: wp.array(dtype=wp.int32),
+        world_order: wp.array(dtype=wp.int32),
+        body_pos: wp.array(dtype=wp.vec3),
+        body_quat: wp.array(dtype=wp.vec4),
+        num_bodies: int,
+        split_bodies: int,
+        body_start: wp.array(dtype=wp.int32),
         group_start: wp.array(dtype=wp.int32),
         centre: wp.array(dtype=wp.vec3),
         cull: wp.array(dtype=wp.float32),
         points: wp.array(dtype=wp.vec3),
         use_cull: int,
-    ) -> wp.float32:
-        """Min d over groups ``g0:g1`` of one body at pose (``pos``, unit ``q`` (w, x, y, z)) in scene ``s``."""
+        out: wp.array(dtype=wp.float32),
+    ):
+        """Thread t: world ``world_order[t]``, all its bodies (``split_bodies`` 0), or world
+        ``world_order[t / num_bodies]``, body ``t % num_bodies`` (1); per body the min over its unculled groups
+        of the trilinear d at its points."""
+        t = wp.tid()
+        wi = t
+        b0 = int(0)
+        b1 = num_bodies
+        if split_bodies != 0:
+            wi = t / num_bodies
+            b0 = t % num_bodies
+            b1 = b0 + 1
+        w = world_order[wi]
+        s = field_scene[field_idx[w]]
         shp = scene_shape[s]
         nx = shp[0]
         ny = shp[1]
@@ -135,91 +151,47 @@ def min_sdf_kernel(scalar: type) -> wp.Kernel:
         o1 = wp.where(nx > 1, ny * nz, 0)
         o2 = wp.where(ny > 1, nz, 0)
         o3 = wp.where(nz > 1, 1, 0)
-        w = q[0]
-        x = q[1]
-        y = q[2]
-        z = q[3]
-        rot = wp.mat33(
-            1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y),
-            2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x),
-            2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y),
-        )  # fmt: skip
-        best = float(wp.inf)
-        for g in range(g0, g1):
-            k0 = group_start[g]
-            k1 = group_start[g + 1]
-            if use_cull != 0:  # d at the bounding-sphere centre (outside the grid: distance to the grid box)
-                u = (pos + rot * centre[g] - org) * inv
-                if not (wp.isfinite(u[0]) and wp.isfinite(u[1]) and wp.isfinite(u[2])):
-                    k1 = k0  # a non-finite pose touches nothing
-                else:
-                    ex = wp.max(wp.max(-u[0], u[0] - float(nx)), 0.0)
-                    ey = wp.max(wp.max(-u[1], u[1] - float(ny)), 0.0)
-                    ez = wp.max(wp.max(-u[2], u[2] - float(nz)), 0.0)
-                    d = wp.sqrt(ex * ex + ey * ey + ez * ez) / inv
-                    if d == 0.0:
-                        d = trilinear_d(sd, u, nx, ny, nz, o1, o2, o3)
-                    if d >= cull[g]:
-                        k1 = k0
-            for k in range(k0, k1):
-                u = (pos + rot * points[k] - org) * inv
-                if (
-                    u[0] >= 0.0
-                    and u[1] >= 0.0
-                    and u[2] >= 0.0
-                    and u[0] <= float(nx)
-                    and u[1] <= float(ny)
-                    and u[2] <= float(nz)
-                ):  # also False for NaN: a non-finite point is clear
-                    best = wp.min(best, trilinear_d(sd, u, nx, ny, nz, o1, o2, o3))
-        return best
-
-    @wp.kernel(module="unique")
-    def min_sdf(
-        scene_ptr: wp.uint64,
-        scene_offset: wp.array(dtype=wp.int64),
-        scene_shape: wp.array(dtype=wp.vec3i),
-        scene_origin: wp.array(dtype=wp.vec3),
-        scene_inv_voxel: wp.array(dtype=wp.float32),
-        field_scene: wp.array(dtype=wp.int32),
-        field_idx: wp.array(dtype=wp.int32),
-        world_order: wp.array(dtype=wp.int32),
-        body_pos: wp.array(dtype=wp.vec3),
-        body_quat: wp.array(dtype=wp.vec4),
-        num_bodies: int,
-        per_thread: int,
-        num_items: int,
-        body_start: wp.array(dtype=wp.int32),
-        group_start: wp.array(dtype=wp.int32),
-        centre: wp.array(dtype=wp.vec3),
-        cull: wp.array(dtype=wp.float32),
-        points: wp.array(dtype=wp.vec3),
-        use_cull: int,
-        out: wp.array(dtype=wp.float32),
-    ):
-        """Thread t: the (world, body) items ``t * per_thread ...`` (world-major over ``world_order``); per item
-        the min over the body's unculled groups of the trilinear d at its points."""
-        t = wp.tid()
-        for item in range(t * per_thread, wp.min(t * per_thread + per_thread, num_items)):
-            w = world_order[item / num_bodies]
-            b = item % num_bodies
-            out[w * num_bodies + b] = body_min(
-                scene_ptr,
-                scene_offset,
-                scene_shape,
-                scene_origin,
-                scene_inv_voxel,
-                field_scene[field_idx[w]],
-                body_pos[w * num_bodies + b],
-                body_quat[w * num_bodies + b],
-                body_start[b],
-                body_start[b + 1],
-                group_start,
-                centre,
-                cull,
-                points,
-                use_cull,
-            )
+        for b in range(b0, b1):
+            q = body_quat[w * num_bodies + b]  # (w, x, y, z), unit
+            qw = q[0]
+            x = q[1]
+            y = q[2]
+            z = q[3]
+            rot = wp.mat33(
+                1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - qw * z), 2.0 * (x * z + qw * y),
+                2.0 * (x * y + qw * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - qw * x),
+                2.0 * (x * z - qw * y), 2.0 * (y * z + qw * x), 1.0 - 2.0 * (x * x + y * y),
+            )  # fmt: skip
+            pos = body_pos[w * num_bodies + b]
+            best = float(wp.inf)
+            for g in range(body_start[b], body_start[b + 1]):
+                k0 = group_start[g]
+                k1 = group_start[g + 1]
+                if use_cull != 0:  # d at the bounding-sphere centre (outside the grid: distance to the grid box)
+                    u = (pos + rot * centre[g] - org) * inv
+                    if not (wp.isfinite(u[0]) and wp.isfinite(u[1]) and wp.isfinite(u[2])):
+                        k1 = k0  # a non-finite pose touches nothing
+                    else:
+                        ex = wp.max(wp.max(-u[0], u[0] - float(nx)), 0.0)
+                        ey = wp.max(wp.max(-u[1], u[1] - float(ny)), 0.0)
+                        ez = wp.max(wp.max(-u[2], u[2] - float(nz)), 0.0)
+                        d = wp.sqrt(ex * ex + ey * ey + ez * ez) / inv
+                        if d == 0.0:
+                            d = trilinear_d(sd, u, nx, ny, nz, o1, o2, o3)
+                        if d >= cull[g]:
+                            k1 = k0
+                for k in range(k0, k1):
+                    u = (pos + rot * points[k] - org) * inv
+                    if (
+                        u[0] >= 0.0
+                        and u[1] >= 0.0
+                        and u[2] >= 0.0
+                        and u[0] <= float(nx)
+                        and u[1] <= float(ny)
+                        and u[2] <= float(nz)
+                    ):  # also False for NaN: a non-finite point is clear
+                        best = wp.min(best, trilinear_d(sd, u, nx, ny, nz, o1, o2, o3))
+            out[w * num_bodies + b] = best
 
     return min_sdf
 

@@ -1,5 +1,5 @@
-"""Benchmarks: ``python scripts/bench.py sim|fields|field_contact|train|eval|gen|scale|soak|live`` (extra args go
-to the case)."""
+"""Benchmarks: ``python scripts/bench.py sim|fields|field_contact|train|learner|eval|gen|scale|soak|live`` (extra
+args go to the case)."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ COMMANDS = {
     "sim": "cat.bench.sim",
     "fields": "cat.bench.fields",
     "field_contact": "cat.bench.field_contact",
+    "learner": "cat.bench.learner",
     "train": "cat.bench.train",
     "eval": "cat.bench.eval",
     "gen": "cat.bench.gen",

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import copy
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import torch
@@ -29,15 +29,12 @@ if TYPE_CHECKING:
     from cat.envs.traversal_env import TraversalEnv
 
 
-def lookup_term(module, name: str, kind: str, registered: Mapping[str, Callable] | None = None) -> Callable:
-    """A term function of ``module`` (or of ``registered``: name -> function, terms added outside the package) by
-    name, or ``ValueError`` naming it and listing the valid names."""
-    if registered and name in registered:
-        return registered[name]
+def lookup_term(module, name: str, kind: str) -> Callable:
+    """A term function of ``module`` by name (termination terms; observation terms are declared:
+    ``cat.envs.mdp.registry.obs_term``), or ``ValueError`` naming it and listing the valid names."""
     fn = getattr(module, name, None)
     if fn is None or name.startswith("_") or not callable(fn) or getattr(fn, "__module__", "") != module.__name__:
-        valid = term_names(module) + sorted(registered or ())
-        raise ValueError(f"unknown {kind} term {name!r}; valid: {', '.join(valid)}")
+        raise ValueError(f"unknown {kind} term {name!r}; valid: {', '.join(term_names(module))}")
     return fn
 
 

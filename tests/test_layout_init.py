@@ -162,3 +162,19 @@ def test_a_history_model_is_refused_across_layouts(tmp_path):
     runner = make_runner(cfg, env, str(tmp_path))
     with pytest.raises(CheckpointError, match="history=2"):
         init_from_prior(runner.alg, env, str(PRIOR))
+
+
+@pytest.mark.parametrize(
+    ("overrides", "message"),
+    [
+        (["task=flat", "algo.actor_hidden_dims=[128,64,32]"], r"does not fit this run's networks"),
+        (["task=flat", "method=wo_obs_field", "algo.actor_hidden_dims=[128,64,32]"],
+         r"\(actor\): mlp.0.weight has 256 units in the prior, 128 here"),
+    ],
+)  # fmt: skip
+def test_networks_of_other_sizes_are_one_clear_error(tmp_path, overrides, message):
+    cfg = load_config([*overrides, "num_envs=2", f"run_root={tmp_path}"])
+    env = make_env(cfg)
+    runner = make_runner(cfg, env, str(tmp_path))
+    with pytest.raises(CheckpointError, match=message):
+        init_from_prior(runner.alg, env, str(PRIOR))

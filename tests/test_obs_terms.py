@@ -62,3 +62,30 @@ def test_the_runtime_provides_the_contract():
     for f in DEPLOY_STATE:
         assert torch.isfinite(getattr(rt.state, f)).all(), f
     assert rt.observation()["actor"].shape == (1, rt.layout.obs_dim)
+
+
+def test_a_declared_deployable_term_reaches_the_runtime_and_its_layout():
+    """A term declared ``deployable`` from outside the package is computed by the deploy runtime and described
+    in its layout metadata, with no change to the runtime (it reads the registry)."""
+    from cat.deploy.policy import PolicySpec
+    from cat.deploy.runtime import DeployCfg, Runtime
+    from cat.deploy.scenes import load_scene
+    from cat.envs.config import ObsGroupCfg, default_obs_groups
+    from cat.envs.mdp.registry import register_observation
+
+    def tilt(env) -> torch.Tensor:
+        return env.state.gravity[:, :2].norm(dim=-1, keepdim=True)
+
+    register_observation("tilt_test", tilt, 1, ([0], [1.0]), "test term", deployable=True)
+    try:
+        groups = {**default_obs_groups(), "student": ObsGroupCfg(terms=["gyro", "tilt_test"], history=2)}
+        spec = PolicySpec("hold", EnvCfg(observations=groups), obs_groups=["student"])
+        rt = Runtime(load_scene("flat"), spec, DeployCfg(realtime=False))
+        x = rt.observation()["student"]
+        assert x.shape == (1, 2 * 4)
+        torch.testing.assert_close(x[:, 3:4], tilt(rt))
+        terms = rt.layout.observation["student"]["terms"]
+        assert [(t["name"], t["size"]) for t in terms] == [("gyro", 3), ("tilt_test", 1)]
+        assert terms[1]["note"] == "test term" and rt.layout.obs_dim == 8
+    finally:
+        OBS_TERMS.pop("tilt_test", None)

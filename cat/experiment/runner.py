@@ -147,7 +147,27 @@ class Runner:
 
         return latest_checkpoint(unit.run_dir)
 
+    def _sequential(self) -> bool:
+        """hydra's ``basic`` launcher (the default) runs a stage's jobs one after another."""
+        chosen = [a.split("=", 1)[1] for a in self.hydra_args if a.split("=", 1)[0].lstrip("+") == "hydra/launcher"]
+        return not chosen or chosen[-1] == "basic"
+
     def _train_stage(self, k: int, units: list[Unit], left: float | None) -> None:
+        """Launch a stage's runs. With a sitting budget and the sequential launcher, one run at a time, each given
+        what the sitting has left when it starts (launched together, each would get the whole budget); runs not
+        reached are left for the next sitting."""
+        if left is None or not self._sequential():
+            self._launch_units(k, units, left)
+            return
+        for n, unit in enumerate(units):
+            left = self.minutes_left()
+            if left is not None and left <= 0:
+                log.info("max_minutes=%g spent: %s left for the next sitting", self.cfg.max_minutes,
+                         ", ".join(u.key for u in units[n:]))  # fmt: skip
+                return
+            self._launch_units(k, [unit], left)
+
+    def _launch_units(self, k: int, units: list[Unit], left: float | None) -> None:
         jobs = [self._job(u, left) for u in units]
         for unit, job in zip(units, jobs, strict=True):
             log.info("stage %d: %s: %s", k, unit.key, _cmd("train", job))

@@ -1,0 +1,35 @@
+"""A sitting's budget (``max_minutes=``) with the sequential launcher: a stage's runs go one at a time, each given
+what the sitting has left when it starts, so one sitting of experiment=table1 (ten runs in one stage) stops on
+time instead of giving every run the whole budget."""
+
+from __future__ import annotations
+
+import logging
+import re
+from pathlib import Path
+
+import yaml
+
+from cat.launcher import load_script
+
+REPO = Path(__file__).resolve().parents[1]
+COMMON = ["sim=mujoco", "num_envs=4", "algo.num_steps_per_env=4", "algo.save_interval=1"]
+
+
+def test_each_sequential_run_gets_what_the_sitting_has_left(tmp_path, caplog):
+    exp = tmp_path / "sit.yaml"
+    cells = {"a": {"task": "flat", "iterations": 1}, "b": {"task": "flat", "iterations": 1, "seeds": [1]}}
+    exp.write_text(yaml.safe_dump({"common": COMMON, "cells": cells}))
+    mod = load_script(REPO / "scripts" / "experiment.py")
+    with caplog.at_level(logging.INFO):
+        code = mod.main([f"experiment={exp}", f"root={tmp_path / 'exps'}", "max_minutes=30"])
+    assert code == 0
+    given = {
+        m.group(1): float(m.group(2))
+        for r in caplog.records
+        if (m := re.match(r"stage 0: (\w+)@\d: .* max_minutes=([\d.]+)", r.getMessage()))
+    }
+    assert set(given) == {"a", "b"}
+    assert given["a"] <= 30 and given["b"] < given["a"]  # b started after a ran: less of the sitting was left
+    assert (tmp_path / "exps/sit/runs/a/seed0/model_0.pt").is_file()
+    assert (tmp_path / "exps/sit/runs/b/seed1/model_0.pt").is_file()

@@ -134,11 +134,13 @@ def test_rollout_judges_the_same(typical_env):
 
 def test_body_points_packing_keeps_every_point_with_its_body():
     groups = [torch.rand(k, 3) for k in (3, 5, 2, 4)]
-    packed, order = BodyPoints.from_groups(groups, [1, 0, 1, 2], [0.1, 0.2, 0.3, 0.4], torch.device("cpu"))
+    centre = torch.arange(12.0).view(4, 3)
+    packed, order = BodyPoints.from_groups(groups, [1, 0, 1, 2], centre, [0.1, 0.2, 0.3, 0.4], torch.device("cpu"))
     assert order == [1, 0, 2, 3] and packed.num_bodies == 3
     assert packed.body_start.tolist() == [0, 1, 3, 4] and packed.group_start.tolist() == [0, 5, 8, 10, 14]
     torch.testing.assert_close(packed.points[5:8], groups[0])
     torch.testing.assert_close(packed.cull, torch.tensor([0.2, 0.1, 0.3, 0.4]))
+    torch.testing.assert_close(packed.centre, centre[[1, 0, 2, 3]])
 
 
 def test_bench_field_contact_prints_its_lines(capsys):

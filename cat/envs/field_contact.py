@@ -221,7 +221,8 @@ class FieldContact:
         """The sample points packed for the fused kernel on ``device`` (cull distance: radius + margin + slack)."""
         if device not in self._packed:
             cull = (self.geom_radius + self.cfg.margin + CULL_SLACK).tolist()
-            self._packed[device] = BodyPoints.from_groups(self.geom_points, self.geom_body.tolist(), cull, device)[0]
+            groups, bodies = self.geom_points, self.geom_body.tolist()
+            self._packed[device] = BodyPoints.from_groups(groups, bodies, self.geom_centre, cull, device)[0]
         return self._packed[device]
 
     def body_sdf(self, bank, field_idx: torch.Tensor, pos: torch.Tensor, quat: torch.Tensor) -> torch.Tensor:

@@ -2,9 +2,10 @@
 """Smallest scene SDF over point sets fixed on rigid bodies: one fused Warp kernel per query.
 
 A :class:`BodyPoints` holds, per body, groups of points in the body's frame (e.g. the surface samples of each
-collision geom), each group with a bounding sphere. :func:`min_sdf_kernel` is one thread per (world, body): it
-rotates and translates the body's points by the body pose and returns the smallest trilinear d of the world's
-scene over them, reading the bank's d grid directly (no point buffer, no per-point query output).
+collision geom), each group with a bounding sphere. :func:`min_sdf_kernel` rotates and translates each body's
+points by the body pose and returns the smallest trilinear d of the world's scene over them, reading the bank's d
+grid directly (no point buffer, no per-point query output). One thread per world on the CPU (a Warp CPU launch
+runs its threads one after another: fewer, longer threads cost less), one per (world, body) on CUDA.
 
 Semantics are the bank query's (:mod:`cat.fields._bank_kernel`): the same trilinear interpolation of the voxel
 centres, and a point outside its scene's grid box (or non-finite) is clear (+inf). A group whose bounding-sphere
@@ -47,25 +48,28 @@ class BodyPoints:
 
     @classmethod
     def from_groups(
-        cls, groups: list[torch.Tensor], group_body: list[int], cull: list[float], device: torch.device
+        cls,
+        groups: list[torch.Tensor],
+        group_body: list[int],
+        centre: torch.Tensor,
+        cull: list[float],
+        device: torch.device,
     ) -> tuple["BodyPoints", list[int]]:
-        """Pack ``groups[g]`` (K_g, 3) of body ``group_body[g]`` with cull distances ``cull[g]``.
-
-        Returns the packing and the order of the groups in it (stable sort by body)."""
+        """Pack ``groups[g]`` (K_g, 3) of body ``group_body[g]``, bounding-sphere centre ``centre[g]`` and cull
+        distance ``cull[g]``. Returns the packing and the order of the groups in it (stable sort by body)."""
         order = sorted(range(len(groups)), key=lambda g: group_body[g])
         nb = max(group_body) + 1 if groups else 0
         counts = torch.tensor([len(groups[g]) for g in order], dtype=torch.int64)
         per_body = torch.bincount(torch.tensor(group_body, dtype=torch.int64), minlength=nb)
         zero = torch.zeros(1, dtype=torch.int64)
         pts = [groups[g].to(torch.float32).cpu() for g in order]
-        centre = [0.5 * (p.amin(0) + p.amax(0)) for p in pts]
         i32, f32 = dict(dtype=torch.int32, device=device), dict(dtype=torch.float32, device=device)
         return (
             cls(
                 points=torch.cat(pts).to(**f32).contiguous(),
                 group_start=torch.cat((zero, counts.cumsum(0))).to(**i32),
                 body_start=torch.cat((zero, per_body.cumsum(0))).to(**i32),
-                centre=torch.stack(centre).to(**f32).contiguous(),
+                centre=centre[order].to(**f32).contiguous(),
                 cull=torch.tensor([cull[g] for g in order], **f32),
             ),
             order,

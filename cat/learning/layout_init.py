@@ -36,7 +36,6 @@ from cat.learning.run_config import load_run_config
 
 log = logging.getLogger(__name__)
 
-FIELD_TERMS = ("field_block", "field_block_odometry")  # terms whose meaning depends on task.field_obs.enabled
 MODELS = {"actor": "actor_state_dict", "critic": "critic_state_dict"}
 NORM_KEYS = ("obs_normalizer._mean", "obs_normalizer._var", "obs_normalizer._std")
 NORM_FLOOR = 1e-6  # variance floor of a new column on a noise-free group (warm_start.MIN_STD squared)
@@ -104,11 +103,11 @@ def model_terms(task: EnvCfg, groups: list[str], what: str) -> list[str]:
 
 
 def term_layout(task: EnvCfg, term: str) -> tuple:
-    """The config that fixes one term's width and meaning (the map grid of a map term, the field switch of the
-    field block): two layouts share a term only where this agrees."""
+    """The config that fixes one term's width and meaning, as its declaration states it (``ObsTerm.layout``: the
+    map grid of a map term, the field switch of the field block): two layouts share a term only where this
+    agrees."""
     one = replace(task, observations={"x": ObsGroupCfg(terms=[term])})
-    layout = group_layout(one, "x")
-    return tuple(layout[2:]) + ((layout[1],) if term in FIELD_TERMS else ())
+    return tuple(group_layout(one, "x")[2:])
 
 
 def prior_blocks(terms: list[str], width: int, known: dict[str, int], what: str) -> list[Block]:

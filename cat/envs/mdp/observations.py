@@ -59,6 +59,10 @@ def _voxel_layout(task: EnvCfg) -> tuple:
     return ("voxel_grid", vg.length, vg.width, vg.height, vg.resolution, vg.forward_offset)
 
 
+def _field_layout(task: EnvCfg) -> tuple:
+    return ("field_obs", bool(task.field_obs.enabled))  # off: the block reads zeros (w/o OBS_field)
+
+
 def _field_clip(task: EnvCfg) -> float:
     return task.field_obs.sdf_clip
 
@@ -157,6 +161,7 @@ def gait_phase(env: TraversalEnv) -> torch.Tensor:
     mirror=_links(FIELD_LINK),
     deployable=True,
     clip=_field_clip,
+    layout=_field_layout,
     note="per query link: F_H (3), grad d (3) in the yaw frame, d clipped to +-clip [m]; refreshed at refresh_hz",
 )
 def field_block(env: TraversalEnv) -> torch.Tensor:
@@ -170,6 +175,7 @@ def field_block(env: TraversalEnv) -> torch.Tensor:
     mirror=_links(FIELD_LINK),  # a mirrored drift (dx, -dy, -dyaw) is as likely: the walk is isotropic
     deployable=True,  # on a robot the block comes from its odometry pose already: its field_block
     clip=_field_clip,
+    layout=_field_layout,
     note="field_block at the links placed by the odometry pose (trained with a drifting pose error); on a robot, "
     "its field_block",
 )

@@ -1,6 +1,8 @@
 """Tables I / II from checkpoints: ``python scripts/eval_table.py manifest=<yaml> out=<dir> [trials_per_scene=<k>]``.
 
-Other keys: ``sim=mujoco|warp``, ``device=``, ``seed=`` (start poses), ``max_envs=``. Writes ``<dir>/trials.csv``,
+Other keys: ``sim=mujoco|warp``, ``device=``, ``seed=`` (start poses), ``max_envs=``, ``perception=ground_truth|lidar``
+(lidar: every trial through the simulated LiDAR -> map -> observation pipeline of the click demo, one robot at a
+time) with ``perception_setting=default|harsh|<yaml>`` (``configs/eval/perception/``). Writes ``<dir>/trials.csv``,
 ``table1.md/.tex``, ``table2.md/.tex`` (the tables the manifest asks for) and prints the Markdown. The manifest
 format is in ``cat/eval/manifest.py`` and docs/evaluation.md.
 """
@@ -17,7 +19,12 @@ from cat.learning.runs import CheckpointError
 
 
 def _job(cfg: EvalTableCfg) -> int:
-    _, files = evaluate(cfg)
+    live = None
+    if cfg.perception == "lidar":
+        from cat.deploy.live_eval import LiveTrials
+
+        live = LiveTrials(cfg.perception_setting)
+    _, files = evaluate(cfg, live)
     write_atomically(cfg.out, files)
     for name in sorted(files):
         if name.endswith(".md"):

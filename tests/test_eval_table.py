@@ -240,7 +240,7 @@ def test_bad_input_names_the_problem_and_writes_nothing(tmp_path, checkpoints, s
     cases = {
         "missing": ({"methods": {"A": [str(tmp_path / "nope" / "model_9.pt")]}, "table1": {}}, "checkpoint not found"),
         "unknown_method": ({"methods": {"A": ["ppo_baseline"]}, "table1": {}}, "unknown method 'ppo_baseline'"),
-        "unknown_key": ({"methods": {"A": [ok]}, "table3": {}}, "unknown manifest key 'table3'"),
+        "unknown_key": ({"methods": {"A": [ok]}, "table4": {}}, "unknown manifest key 'table4'"),
         "unknown_t1": ({"methods": {"A": [ok]}, "table1": {"scene_sed": 0}}, "unknown table1 key 'scene_sed'"),
         "empty_dir": (
             {"methods": {"A": [ok]}, "table2": {"easy": str(empty)}},

@@ -6,6 +6,11 @@ simulator plays the world and the sensor) and the robot's estimate of itself (od
 Returns are placed in the world with the *estimated* sensor pose (forward kinematics of the estimate), as on a
 robot. The newest field is published as a one-field ``FieldBank`` (swapped atomically, never written in place),
 with the goal it was built for.
+
+Policies that read a voxel grid or an elevation map instead (Table III's students) get them from the same cycle:
+the window's occupancy (no geofence) becomes a ``cat.envs.perception.WindowPerception``, whose tables are built by
+the code the env's ground-truth terms use, and ``elevation`` / ``voxels`` answer the terms' queries from the
+newest one. A result becomes visible ``latency_s`` of robot time after the snapshot it was built from.
 """
 
 from __future__ import annotations
@@ -23,6 +28,8 @@ import numpy as np
 from cat.deploy.kinematics import RobotFK
 from cat.deploy.lidar import Lidar, LidarCfg
 from cat.deploy.voxel_map import MapCfg, VoxelMap, WindowCfg
+from cat.envs.config import PerceptionCfg as MapTermsCfg
+from cat.envs.perception import ScenePerception, WindowPerception
 from cat.fields import FieldBank, FieldCfg, Grid, build_field
 
 log = logging.getLogger(__name__)
@@ -39,6 +46,9 @@ class PerceptionCfg:
     """Window voxels outside the map are blocked, so the field never routes the robot out of the mapped area."""
     goal_margin: float = 0.08
     """A goal outside the window is replaced by the closest point this far inside it [m] (a local subgoal)."""
+    latency_s: float = 0.0
+    """A cycle's field and maps reach the policy this long (robot time) after its snapshot [s]; 0: at once (in real
+    time the cycle's own compute time is the latency)."""
 
 
 @dataclass
@@ -121,7 +131,11 @@ class Perception:
         cfg: PerceptionCfg | None = None,
         field_cfg: FieldCfg | None = None,
         seed: int = 0,
+        maps: MapTermsCfg | None = None,
+        needs_field: bool = True,
     ):
+        """``maps``: also publish the window's elevation map / voxel grid tables (a policy reads them);
+        ``needs_field``: build HumanoidPF for the goal (off for a policy that reads no field)."""
         self.cfg = cfg or PerceptionCfg()
         self.field_cfg = field_cfg or FieldCfg()
         self.model = model
@@ -129,7 +143,11 @@ class Perception:
         self.lidar = Lidar(model, self.cfg.lidar, seed=seed)
         self.map = VoxelMap(map_grid, self.cfg.map)
         self._data = mujoco.MjData(model)  # this thread's own copy: never touches the simulation's data
+        self.maps_cfg, self.needs_field = maps, needs_field
+        self._free = ScenePerception(maps or MapTermsCfg(), None, "cpu")  # before the first map: free space
         self.latest: LiveField | None = None
+        self.latest_map: WindowPerception | None = None
+        self._pending: deque[tuple[float, LiveField | None, WindowPerception | None]] = deque()
         self.stats: deque[CycleStats] = deque(maxlen=600)
         self.update_times: list[float] = []  # simulated time of the snapshot behind each field update
         self._thread: threading.Thread | None = None
@@ -168,21 +186,53 @@ class Perception:
         return None
 
     def cycle(self, snap: Snapshot) -> CycleStats:
-        """Scan -> map -> window -> field; publishes ``latest`` when a goal is set."""
+        """Scan -> map -> window -> field (when a goal is set) and map tables; published after ``latency_s``."""
         t0 = time.perf_counter()
         self.scan_into_map(snap)
-        occ, grid = self.map.window(snap.estimate.root_pos[:2], self.cfg.window.shape, self.cfg.geofence)
+        centre, shape = snap.estimate.root_pos[:2], self.cfg.window.shape
+        maps = None
+        if self.maps_cfg is not None:  # the terms read free space outside the map, as outside a scene's grid
+            occ, grid = self.map.window(centre, shape, False)
+            maps = WindowPerception(self.maps_cfg, occ, grid)
+        building = snap.goal is not None and self.needs_field
+        if building:
+            occ, grid = self.map.window(centre, shape, self.cfg.geofence)
         t1 = time.perf_counter()
-        if snap.goal is not None:
-            live = self.build(occ, grid, snap.goal, snap.goal_version, snap.estimate.time)
-            if live is not None:
-                self.latest = live
-                self.update_times.append(snap.estimate.time)
+        live = self.build(occ, grid, snap.goal, snap.goal_version, snap.estimate.time) if building else None
         t2 = time.perf_counter()
-        field_ms = (t2 - t1) * 1e3 if snap.goal is not None else 0.0
+        self._pending.append((snap.estimate.time + self.cfg.latency_s, live, maps))
+        if self.cfg.latency_s <= 0:
+            self.publish(snap.estimate.time)
+        field_ms = (t2 - t1) * 1e3 if building else 0.0
         st = CycleStats((t1 - t0) * 1e3, field_ms, (t2 - t0) * 1e3, time.monotonic())
         self.stats.append(st)
         return st
+
+    def publish(self, now: float) -> None:
+        """Make the results whose latency has passed at robot time ``now`` the latest ones."""
+        while self._pending and self._pending[0][0] <= now:
+            _, live, maps = self._pending.popleft()
+            if live is not None:
+                self.latest = live
+                self.update_times.append(live.stamp)
+            if maps is not None:
+                self.latest_map = maps
+
+    def reset_map(self) -> None:
+        """Forget everything mapped and built (a new trial in the same scene)."""
+        self.map = VoxelMap(self.map.grid, self.cfg.map)
+        self.latest, self.latest_map = None, None
+        self._pending.clear()
+        self.update_times.clear()
+
+    # --- the map terms' queries (``cat.envs.mdp.observations``: ``env.perception.elevation`` / ``voxels``) ----
+    def elevation(self, root_pos, yaw):
+        """(ground, overhead) on the robot-centric map grid from the newest live map (free space before one)."""
+        return (self.latest_map or self._free).elevation(root_pos, yaw)
+
+    def voxels(self, root_pos, yaw):
+        """Robot-centric occupancy from the newest live map (empty before one)."""
+        return (self.latest_map or self._free).voxels(root_pos, yaw)
 
     # --- background thread -------------------------------------------------------------------------------
     def start(self, source: Callable[[], Snapshot]) -> None:

@@ -47,6 +47,9 @@ from cat.terrain.mujoco_export import add_obstacles_to_spec
 
 log = logging.getLogger(__name__)
 
+MAP_TERMS = ("elevation_map", "ground_map", "overhead_map", "voxel_grid")  # read ``perception``'s live map tables
+FIELD_TERMS = ("field_block", "field_block_odometry")  # read the live HumanoidPF
+
 
 @dataclass
 class DeployCfg:
@@ -60,6 +63,11 @@ class DeployCfg:
     """Std of the odometry position error [m] (0: the pelvis pose as a perfect odometry would give it)."""
     odom_yaw_noise: float = 0.0
     """Std of the odometry yaw error [rad]."""
+    odom_drift_xy: float = 0.0
+    """Odometry drift: a random walk of the position error, std sigma * sqrt(t) per axis [m / sqrt(s)] (the
+    model of ``cat.envs.odometry``), from zero at each reset."""
+    odom_drift_yaw: float = 0.0
+    """Random walk of the heading error [rad / sqrt(s)]."""
     start_yaw: float = 0.0
     trial_time_s: float = 1.0e6
     """Window of a goal's trial [s]: reaching the goal later does not count (headless: its ``time_limit``)."""
@@ -130,8 +138,17 @@ class Runtime:
         self.data = mujoco.MjData(self.model)
         self.fk = RobotFK(self.robot)
         lo, hi = scene.bounds[0, :2] - self.deploy.map_margin, scene.bounds[1, :2] + self.deploy.map_margin
+        reads = {t for g in spec.obs_groups for t in resolve_groups(self.task.observations)[g]}
+        self.reads_maps = bool(reads & set(MAP_TERMS))  # a voxel / elevation student: map tables from the live map
+        self.reads_field = bool(reads & set(FIELD_TERMS)) or not self.reads_maps
         self.perception = Perception(
-            self.model, self.fk, map_grid(lo, hi, self.deploy.perception.map), self.deploy.perception, self.field_cfg
+            self.model,
+            self.fk,
+            map_grid(lo, hi, self.deploy.perception.map),
+            self.deploy.perception,
+            self.field_cfg,
+            maps=self.task.perception if self.reads_maps else None,
+            needs_field=self.reads_field,
         )
         self.checker = GoalChecker(scene)
         self.rng = np.random.default_rng(self.deploy.seed)
@@ -165,14 +182,17 @@ class Runtime:
         self.field_refresh = max(1, round(1.0 / (self.task.field_obs.refresh_hz * self.dt)))
         self.perception_every = max(1, round(1.0 / (self.deploy.perception.rate_hz * self.dt)))
 
-    def reset(self) -> None:
-        """Stand at the scene's start, no goal, empty bookkeeping (the map is kept)."""
+    def reset(self, start_xy=None, yaw: float | None = None) -> None:
+        """Stand at the scene's start (or ``start_xy`` facing ``yaw``), no goal, empty bookkeeping (the map is
+        kept: ``perception.reset_map`` forgets it)."""
         with self._lock:
             d = self.data
             mujoco.mj_resetData(self.model, d)
             d.qpos[:] = home_qpos(self.robot)
-            d.qpos[:2] = self.scene.start[:2]
-            d.qpos[3:7] = yaw_quat(torch.tensor([self.deploy.start_yaw], dtype=torch.float64))[0].numpy()
+            d.qpos[:2] = self.scene.start[:2] if start_xy is None else np.asarray(start_xy, dtype=np.float64)[:2]
+            yaw = self.deploy.start_yaw if yaw is None else float(yaw)
+            d.qpos[3:7] = yaw_quat(torch.tensor([yaw], dtype=torch.float64))[0].numpy()
+            self._drift = np.zeros(3)  # odometry starts at the true pose
             d.ctrl[:] = self.robot.default_joint_pos
             mujoco.mj_forward(self.model, d)
             f32 = torch.float32
@@ -213,11 +233,13 @@ class Runtime:
         """IMU, encoders and odometry now (odometry = pelvis pose + configured noise)."""
         d, c = self.data, self.deploy
         pos = d.qpos[:3].copy()
+        pos[:2] += self._drift[:2]
         quat = d.qpos[3:7].copy()
         if c.odom_pos_noise > 0:
             pos += self.rng.normal(0.0, c.odom_pos_noise, 3)
-        if c.odom_yaw_noise > 0:
-            dq = yaw_quat(torch.tensor([self.rng.normal(0.0, c.odom_yaw_noise)], dtype=torch.float64))[0].numpy()
+        dyaw = self._drift[2] + (self.rng.normal(0.0, c.odom_yaw_noise) if c.odom_yaw_noise > 0 else 0.0)
+        if dyaw != 0.0:
+            dq = yaw_quat(torch.tensor([dyaw], dtype=torch.float64))[0].numpy()
             quat = np.empty(4)
             mujoco.mju_mulQuat(quat, dq, d.qpos[3:7])
         return RobotEstimate(
@@ -318,12 +340,15 @@ class Runtime:
 
     @property
     def walking(self) -> bool:
-        """The policy acts once the field for the current goal has reached the observation."""
-        return self.goal is not None and self.used_field is not None and not self.outcome.fell
+        """The policy acts once its block is there: the field for the current goal has reached the observation,
+        or (a policy reading no field) a live map has."""
+        ready = self.used_field is not None if self.reads_field else self.perception.latest_map is not None
+        return self.goal is not None and ready and not self.outcome.fell
 
     # --- one control step -------------------------------------------------------------------------------------
     def step(self) -> None:
         with self._lock:
+            self.perception.publish(self.sim_time)  # results whose latency has passed
             if self.step_count % self.field_refresh == 0:
                 self._refresh_field_obs()
             if self.walking:
@@ -346,6 +371,9 @@ class Runtime:
                     self._count_contact()
             self.step_count += 1
             self.sim_time += self.dt
+            if self.deploy.odom_drift_xy > 0 or self.deploy.odom_drift_yaw > 0:
+                sigma = np.array([self.deploy.odom_drift_xy] * 2 + [self.deploy.odom_drift_yaw])
+                self._drift += self.rng.normal(0.0, 1.0, 3) * sigma * np.sqrt(self.dt)
             self.phase = torch.remainder(self.phase + self.gait_freq * self.dt, 1.0)
             self._update_state(self.estimate())
             self._score()

@@ -6,7 +6,8 @@ height levels; tables are shifted to their tiles in the shared world frame and p
 step a fixed grid of sample points in the yaw frame is rotated by each env's yaw, placed at its root and read
 by one nearest-column gather into its own scene's table: batched torch ops, no per-env Python. Points outside
 a scene's grid read free space (floor 0, no overhead, empty). With no scenes (flat task) the maps are constant:
-the floor and the overhead cap.
+the floor and the overhead cap. ``WindowPerception`` reads the same tables built from one live occupancy grid (a
+robot's log-odds map window): one definition of each map, whatever the occupancy source.
 """
 
 from __future__ import annotations
@@ -52,6 +53,26 @@ def voxel_points(cfg: VoxelGridCfg) -> torch.Tensor:
     xs, ys = _axis(cfg.length, cfg.resolution, cfg.forward_offset), _axis(cfg.width, cfg.resolution)
     zs = (np.arange(nz) + 0.5) * cfg.resolution
     return torch.tensor(np.stack(np.meshgrid(xs, ys, zs, indexing="ij"), -1).reshape(-1, 3), dtype=torch.float32)
+
+
+def elevation_table(occ: np.ndarray, grid, cfg: HeightMapCfg) -> np.ndarray:
+    """(X, Y, 2) ground and overhead heights per xy column of occupancy ``occ`` on ``grid``, pooled over a map
+    cell: the one definition of the elevation map's columns, for a scene's occupancy and for a live map alike."""
+    ground, over = elevation_layers(
+        occ, grid, cfg.split_height, cfg.overhead_cap, pool_voxels(cfg.resolution, grid.voxel)
+    )
+    return np.stack((ground, over), axis=-1)
+
+
+def voxel_table(occ: np.ndarray, grid, cfg: VoxelGridCfg, zs: np.ndarray) -> np.ndarray:
+    """(X, Y, len(zs)) uint8 pooled occupancy of ``occ`` on ``grid`` at heights ``zs`` per xy column: the voxel
+    grid's columns (levels outside the grid are empty)."""
+    pooled = pooled_occupancy(occ, pool_voxels(cfg.resolution, grid.voxel))
+    iz = np.floor((zs - grid.origin[2]) / grid.voxel).astype(int)
+    valid = (iz >= 0) & (iz < occ.shape[2])
+    table = np.zeros((*occ.shape[:2], len(zs)), dtype=np.uint8)
+    table[..., valid] = pooled[..., iz[valid]]
+    return table
 
 
 class _Columns:
@@ -103,13 +124,11 @@ class ScenePerception:
             yield scene.occupancy(), grid, np.asarray(grid.origin) + offset
 
     def _build_maps(self) -> _Columns:
-        hm = self.cfg.height_map
         tables, origins, voxels = [], [], []
         for occ, grid, origin in self._scene_grids():
-            pool = pool_voxels(hm.resolution, grid.voxel)
-            ground, over = elevation_layers(occ, grid, hm.split_height, hm.overhead_cap, pool)
-            tables.append(np.stack((ground, over), axis=-1)), origins.append(origin), voxels.append(grid.voxel)
-        return _Columns(tables, origins, voxels, [0.0, hm.overhead_cap], self.device)
+            tables.append(elevation_table(occ, grid, self.cfg.height_map)), origins.append(origin)
+            voxels.append(grid.voxel)
+        return _Columns(tables, origins, voxels, [0.0, self.cfg.height_map.overhead_cap], self.device)
 
     def _build_voxels(self) -> _Columns:
         """Per scene, the pooled occupancy at the grid's height levels (X, Y, levels): a column per xy cell."""
@@ -117,13 +136,11 @@ class ScenePerception:
         zs = self.voxel_points[: voxel_shape(vg)[2], 2].cpu().numpy()
         tables, origins, voxels = [], [], []
         for occ, grid, origin in self._scene_grids():
-            pooled = pooled_occupancy(occ, pool_voxels(vg.resolution, grid.voxel))
-            iz = np.floor((zs - grid.origin[2]) / grid.voxel).astype(int)
-            valid = (iz >= 0) & (iz < occ.shape[2])
-            table = np.zeros((*occ.shape[:2], len(zs)), dtype=np.uint8)
-            table[..., valid] = pooled[..., iz[valid]]
-            tables.append(table), origins.append(origin), voxels.append(grid.voxel)
+            tables.append(voxel_table(occ, grid, vg, zs)), origins.append(origin), voxels.append(grid.voxel)
         return _Columns(tables, origins, voxels, np.zeros(len(zs)), self.device)
+
+    def _has_occupancy(self) -> bool:
+        return self.scenes is not None
 
     # --- queries ---------------------------------------------------------------------------------------------
     def _scene_of_env(self, n: int) -> torch.Tensor:
@@ -131,7 +148,7 @@ class ScenePerception:
 
     def layers_at(self, xy: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(ground, overhead) heights (N, P) at world points ``xy`` (N, P, 2), each env in its own scene."""
-        if self.scenes is None:
+        if not self._has_occupancy():
             shape = xy.shape[:-1]
             return torch.zeros(shape, device=xy.device), torch.full(
                 shape, self.cfg.height_map.overhead_cap, device=xy.device
@@ -148,12 +165,31 @@ class ScenePerception:
     def voxels(self, root_pos: torch.Tensor, yaw: torch.Tensor) -> torch.Tensor:
         """Occupancy (N, P) in {0, 1} at the robot-centric voxel grid cells of each env, row-major (x, y, z)."""
         n = root_pos.shape[0]
-        if self.scenes is None:
+        if not self._has_occupancy():
             return torch.zeros(n, self.voxel_points.shape[0], device=root_pos.device)
         if self._voxels is None:
             self._voxels = self._build_voxels()
         xy = _to_world(self.voxel_columns, root_pos, yaw)
         return self._voxels.gather(self._scene_of_env(n), xy).reshape(n, -1).to(torch.float32)
+
+
+class WindowPerception(ScenePerception):
+    """The same maps read from one occupancy grid instead of the env's scenes: a live map's window on a robot
+    (``cat.deploy.perception``). Tables, gather and frames are ``ScenePerception``'s; only the occupancy differs.
+    Every env (row of ``root_pos``) reads this grid; outside it is free space, as outside a scene's grid."""
+
+    def __init__(self, cfg: PerceptionCfg, occ: np.ndarray, grid, device="cpu"):
+        super().__init__(cfg, None, device)
+        self._window = (np.asarray(occ, dtype=bool), grid, np.asarray(grid.origin, dtype=np.float64))
+
+    def _has_occupancy(self) -> bool:
+        return True
+
+    def _scene_grids(self):
+        yield self._window
+
+    def _scene_of_env(self, n: int) -> torch.Tensor:
+        return torch.zeros(n, dtype=torch.long, device=self.device)
 
 
 def _to_world(local_xy: torch.Tensor, root_pos: torch.Tensor, yaw: torch.Tensor) -> torch.Tensor:

@@ -2,7 +2,9 @@
 
 For each row × checkpoint × table column: an env on the column's scenes built from the checkpoint's own
 ``config.yaml`` (its observation layout), the same trials for every method (``cat.eval.trials``), run by
-``cat.eval.runner``. Nothing is written until every trial has run; then all files are written to temporary
+``cat.eval.runner``; with ``perception=lidar`` each trial instead runs through the simulated LiDAR perception of the
+deploy runtime (a hook, ``cat.deploy.live_eval.LiveTrials``, handed in by ``scripts/eval_table.py``: the deploy
+layer sits above this one). Nothing is written until every trial has run; then all files are written to temporary
 names and renamed into place, so an error leaves no half-written output.
 """
 
@@ -45,6 +47,8 @@ class EvalTableCfg:
     max_envs: int = 256  # parallel trials per batch
     time_s: float = 5.0  # trial length (paper: 5 s)
     radius: float = 0.1  # success radius (paper: 0.1 m)
+    perception: str = "ground_truth"  # ground_truth (the env's terms) | lidar (LiDAR -> map -> block, per trial)
+    perception_setting: str = "default"  # with lidar: configs/eval/perception/<name>.yaml (default | harsh) or a path
 
 
 def scene_groups(manifest: Manifest) -> dict[str, list[SceneGroup]]:
@@ -55,6 +59,9 @@ def scene_groups(manifest: Manifest) -> dict[str, list[SceneGroup]]:
         out["table1"] = [SceneGroup.typical(k, t1["variants"], t1["scene_seed"]) for k in TYPICAL_KINDS]
     if manifest.table2:
         out["table2"] = [SceneGroup.from_dir(name, folder) for name, folder in manifest.table2.items()]
+    if manifest.table3 is not None:
+        t3 = manifest.table3
+        out["table3"] = [SceneGroup.typical(k, t3["variants"], t3["scene_seed"]) for k in t3["kinds"]]
     return out
 
 
@@ -104,10 +111,17 @@ def trial_row(run: MethodRun, table: str, group: SceneGroup, t: Trial, r: TrialR
     }
 
 
-def evaluate(cfg: EvalTableCfg) -> tuple[list[dict[str, str]], dict[str, str]]:
-    """(trials.csv rows, {file name: content}) for the manifest; writes nothing."""
+def evaluate(cfg: EvalTableCfg, live=None) -> tuple[list[dict[str, str]], dict[str, str]]:
+    """(trials.csv rows, {file name: content}) for the manifest; writes nothing. ``live``: the perception-in-the-
+    loop hook (``check(run)``, ``run(run, group, trials, time_s, radius, seed, bar)``), needed by
+    ``perception=lidar``."""
     if cfg.trials_per_scene < 1:
         raise ManifestError(f"trials_per_scene must be >= 1, got {cfg.trials_per_scene}")
+    if cfg.perception not in ("ground_truth", "lidar"):
+        raise ManifestError(f"perception must be ground_truth or lidar, got {cfg.perception!r}")
+    if cfg.perception == "lidar" and live is None:
+        raise ManifestError("perception=lidar needs the live perception hook (scripts/eval_table.py hands it in)")
+    live = live if cfg.perception == "lidar" else None
     manifest = load_manifest(cfg.manifest)
     opts = EvalCfg(
         starts=cfg.trials_per_scene, seed=cfg.seed, max_envs=cfg.max_envs, success=SuccessCfg(cfg.radius, cfg.time_s)
@@ -115,6 +129,8 @@ def evaluate(cfg: EvalTableCfg) -> tuple[list[dict[str, str]], dict[str, str]]:
     for runs in manifest.methods.values():
         for run in runs:
             check_policy(run, opts, cfg.sim, cfg.device)  # before the scenes: a bad checkpoint fails fast
+            if live is not None:
+                live.check(run)  # a block the live pipeline cannot build: refused before any trial
     groups = scene_groups(manifest)
     trials = {
         (table, g.name): scene_trials(g.scenes, opts.starts, opts.seed, opts.start_yaw_range)
@@ -131,6 +147,11 @@ def evaluate(cfg: EvalTableCfg) -> tuple[list[dict[str, str]], dict[str, str]]:
                     if not run.plays(table, group.name):
                         continue
                     ts = trials[table, group.name]
+                    bar.set_postfix_str(f"{run.method}/{run.seed} {table} {group.name}")
+                    if live is not None:
+                        results = live.run(run, group, ts, cfg.time_s, cfg.radius, opts.seed, bar)
+                        rows += [trial_row(run, table, group, t, r) for t, r in zip(ts, results, strict=True)]
+                        continue
                     n = min(len(ts), opts.max_envs)
                     trained = run.config.sim.obstacles  # evaluation is physical whatever it says
                     env = make_eval_env(run.config.task, group, n, opts, cfg.sim, cfg.device, trained)
@@ -148,6 +169,8 @@ def evaluate(cfg: EvalTableCfg) -> tuple[list[dict[str, str]], dict[str, str]]:
         f"{opts.starts} start pose(s) per scene goal; success: within {cfg.radius:g} m within {cfg.time_s:g} s, "
         f"no contact, no fall; sim={cfg.sim}."
     )
+    if live is not None:
+        note += f" Perception in the loop: LiDAR -> log-odds map -> block, setting {cfg.perception_setting!r}."
     per_type = manifest.per_type_methods()
     for table, gl in groups.items():
         names = [g.name for g in gl]

@@ -11,6 +11,8 @@ table1: {scene_seed: 0}   # optional: the 8 typical types, 10 variants each (pap
 table2:                   # optional: unseen scene folders (paper Table II), one column per entry
   easy: data/test_unseen/easy
   hard: data/test_unseen/hard
+table3: {scene_seed: 0}   # optional: Table III's 4 types (crouch-pass, hurdle-pass, side-pass, hurdle-crouch);
+                          # `variants: n`, `kinds: [...]` (typical types) as for table1
 ```
 
 A per-type row plays each Table I column with that type's checkpoints and leaves the types it does not list
@@ -35,8 +37,9 @@ from cat.learning.run_config import load_run_config
 from cat.terrain import TYPICAL_KINDS
 
 HOLD = "hold"
-TOP_KEYS = ("methods", "table1", "table2")
+TOP_KEYS = ("methods", "table1", "table2", "table3")
 TABLE1_KEYS = ("scene_seed", "variants")
+TABLE3_KINDS = ("crouch-pass", "hurdle-pass", "side-pass", "hurdle-crouch")  # paper Table III's columns
 
 
 class ManifestError(ValueError):
@@ -63,6 +66,7 @@ class Manifest:
     methods: dict[str, list[MethodRun]]
     table1: dict | None = None  # {"scene_seed": int, "variants": int}
     table2: dict[str, str] = field(default_factory=dict)  # column -> scene folder
+    table3: dict | None = None  # {"scene_seed": int, "variants": int, "kinds": [typical types]}
 
     def per_type_methods(self) -> list[str]:
         """Rows that give a checkpoint per Table I scene type (specialists) rather than one for every column."""
@@ -92,9 +96,10 @@ def load_manifest(path: str | os.PathLike) -> Manifest:
     methods = _methods(raw.get("methods"))
     table1 = _table1(raw.get("table1")) if "table1" in raw else None
     table2 = _table2(raw.get("table2")) if "table2" in raw else {}
-    if table1 is None and not table2:
-        raise ManifestError("manifest asks for no table: add table1 and/or table2")
-    manifest = Manifest(methods, table1, table2)
+    table3 = _table3(raw.get("table3")) if "table3" in raw else None
+    if table1 is None and not table2 and table3 is None:
+        raise ManifestError("manifest asks for no table: add table1, table2 and/or table3")
+    manifest = Manifest(methods, table1, table2, table3)
     per_type = manifest.per_type_methods()
     if per_type and table1 is None:
         raise ManifestError(
@@ -167,6 +172,21 @@ def _table1(raw) -> dict:
         if not isinstance(v, int) or isinstance(v, bool) or (k == "variants" and v < 1):
             raise ManifestError(f"table1 {k} must be a {'positive ' if k == 'variants' else ''}integer, got {v!r}")
     return out
+
+
+def _table3(raw) -> dict:
+    """Table III: typical types (``kinds``, default the paper's four), ``variants`` each from ``scene_seed``."""
+    raw = dict(raw or {}) if isinstance(raw, dict) or raw is None else raw
+    if not isinstance(raw, dict):
+        raise ManifestError(f"table3 must be a mapping like {{scene_seed: 0}}, got {raw!r}")
+    kinds = raw.pop("kinds", list(TABLE3_KINDS))
+    if not isinstance(kinds, list) or not kinds or any(k not in TYPICAL_KINDS for k in kinds):
+        raise ManifestError(f"table3 kinds must be a list of typical types ({', '.join(TYPICAL_KINDS)}), got {kinds!r}")
+    try:
+        out = _table1(raw)
+    except ManifestError as err:
+        raise ManifestError(str(err).replace("table1", "table3")) from None
+    return {**out, "kinds": [str(k) for k in kinds]}
 
 
 def _table2(raw) -> dict[str, str]:

@@ -39,6 +39,7 @@ CSV_COLUMNS = (
 TITLES = {
     "table1": "Table I: traversal of the 8 typical scene types (paper Table I)",
     "table2": "Table II: zero-shot traversal of unseen indoor scenes (paper Table II)",
+    "table3": "Table III: students of the same teachers by exteroceptive block (paper Table III)",
 }
 
 

@@ -33,6 +33,15 @@ DEPLOY_STATE = (
 """``SimState`` fields a robot has (the rest, e.g. ``root_lin_vel`` or ``foot_contact``, are privileged)."""
 
 
+class MapSource(Protocol):
+    """Robot-centric maps the map terms read: the env's scene occupancy (``cat.envs.perception.ScenePerception``)
+    or, on a robot, its live LiDAR map (``cat.deploy.perception.Perception``), through the same tables."""
+
+    def elevation(self, root_pos: torch.Tensor, yaw: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]: ...
+
+    def voxels(self, root_pos: torch.Tensor, yaw: torch.Tensor) -> torch.Tensor: ...
+
+
 class TermContext(Protocol):
     """What deployable observation terms read (shapes for N worlds; the runtime has N = 1)."""
 
@@ -49,6 +58,7 @@ class TermContext(Protocol):
     phase: torch.Tensor  # (N,) gait clock in [0, 1)
     field_obs_buf: torch.Tensor  # (N, K, 7) HumanoidPF block (cat.envs.mdp.field_obs), refreshed at refresh_hz
     field_obs_odom_buf: torch.Tensor | None  # the block at the odometry-placed links (None: field_obs_buf)
+    perception: MapSource  # elevation map / voxel grid source (scene occupancy, or the robot's live map)
 
 
 CONTEXT_FIELDS = tuple(TermContext.__annotations__)

@@ -189,9 +189,10 @@ def field_block_odometry(env: TraversalEnv) -> torch.Tensor:
     return env.field_obs_odom_buf.reshape(env.num_envs, -1)
 
 
-# --- perception maps (baselines; not computed by the deploy runtime) ---------------------------------------
+# --- perception maps (baselines; a deployed robot reads them from its live map: cat.deploy.perception) ----
 @observation_term(
     lambda task, robot: 2 * _map_cells(task),
+    deployable=True,
     noise=NOISY,
     mirror=_map_mirror(2),
     clip=_overhead_cap,
@@ -210,6 +211,7 @@ def elevation_map(env: TraversalEnv) -> torch.Tensor:
 
 @observation_term(
     lambda task, robot: _map_cells(task),
+    deployable=True,
     noise=NOISY,
     mirror=_map_mirror(1),
     layout=_height_map_layout,
@@ -222,6 +224,7 @@ def ground_map(env: TraversalEnv) -> torch.Tensor:
 
 @observation_term(
     lambda task, robot: _map_cells(task),
+    deployable=True,
     noise=NOISY,
     mirror=_map_mirror(1),
     clip=_overhead_cap,
@@ -235,6 +238,7 @@ def overhead_map(env: TraversalEnv) -> torch.Tensor:
 
 @observation_term(
     lambda task, robot: int(np.prod(voxel_shape(task.perception.voxel_grid))),
+    deployable=True,
     noise=TermNoise(kind="flip"),  # occupancy in {0, 1}: noise flips cells instead of adding to them
     mirror=lambda task, robot: grid_mirror(voxel_shape(task.perception.voxel_grid)),
     layout=_voxel_layout,

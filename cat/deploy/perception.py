@@ -185,10 +185,12 @@ class Perception:
                 sub = free
         return None
 
-    def cycle(self, snap: Snapshot) -> CycleStats:
-        """Scan -> map -> window -> field (when a goal is set) and map tables; published after ``latency_s``."""
+    def cycle(self, snap: Snapshot, scan: bool = True) -> CycleStats:
+        """Scan -> map -> window -> field (when a goal is set) and map tables; published after ``latency_s``.
+        ``scan=False``: from the map as it is (a map filled otherwise, e.g. a fully observed scene in a test)."""
         t0 = time.perf_counter()
-        self.scan_into_map(snap)
+        if scan:
+            self.scan_into_map(snap)
         centre, shape = snap.estimate.root_pos[:2], self.cfg.window.shape
         maps = None
         if self.maps_cfg is not None:  # the terms read free space outside the map, as outside a scene's grid

@@ -212,6 +212,25 @@ class VoxelMap:
                 device=self.device,
             )
 
+    def load_occupancy(self, occ: np.ndarray, grid: Grid) -> None:
+        """Set the map where ``grid`` (on the map's voxel lattice) overlaps it: occupied voxels of ``occ`` to
+        ``l_max``, the others to ``l_min`` (a prior map, or a fully observed scene)."""
+        g = self.grid
+        if not np.isclose(grid.voxel, g.voxel):
+            raise ValueError(f"grid voxel {grid.voxel} differs from the map's {g.voxel}")
+        off_f = (np.asarray(grid.origin) - np.asarray(g.origin)) / g.voxel
+        off = np.round(off_f).astype(int)
+        if not np.allclose(off_f, off, atol=1e-6):
+            raise ValueError("grid is not on the map's voxel lattice")
+        lo, hi = np.maximum(off, 0), np.minimum(off + np.array(occ.shape), np.array(g.shape))
+        if np.any(hi <= lo):
+            return
+        src = np.asarray(occ, dtype=bool)[tuple(slice(a - o, b - o) for a, b, o in zip(lo, hi, off, strict=True))]
+        with self._lock:
+            host = self._logodds.numpy().copy()
+            host[lo[0] : hi[0], lo[1] : hi[1], lo[2] : hi[2]] = np.where(src, self.cfg.l_max, self.cfg.l_min)
+            self._logodds.assign(host)
+
     def logodds(self) -> np.ndarray:
         """Copy of the log-odds grid (nx, ny, nz)."""
         with self._lock:

@@ -19,11 +19,16 @@ Tolerances (analytic scene: a box hurdle and a ceiling on 4 cm voxel edges, test
 
 from __future__ import annotations
 
+import csv
+import importlib.util
+import logging
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
+import yaml
 from scipy import ndimage
 
 from cat.deploy.live_eval import LiveSettingCfg, check_live, deploy_cfg, load_setting
@@ -49,6 +54,7 @@ POSES = [
     ((2.0, -0.5), -2.8),
     ((0.2, -0.6), 0.4),
 ]
+REPO = Path(__file__).resolve().parents[1]
 MAP_TOP = 1.4  # the map's height (MapCfg.height): voxel-grid levels above it are not mapped
 
 
@@ -165,3 +171,51 @@ def test_a_block_the_live_pipeline_cannot_build_is_refused_by_name():
         check_live(MethodRun("Priv", 0, "x/model_1.pt", cfg))
     with pytest.raises(ValueError, match="known: default, harsh"):
         load_setting("gentle")
+
+
+def _eval_table():
+    spec = importlib.util.spec_from_file_location("eval_table", REPO / "scripts" / "eval_table.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _rows(folder: Path) -> list[dict]:
+    with open(folder / "trials.csv") as f:
+        return list(csv.DictReader(f))
+
+
+def test_eval_table_scores_a_shipped_policy_through_perception(tmp_path, monkeypatch, caplog):
+    """One trial of the shipped 5-group generalist (HumanoidPF at the odometry pose) through LiDAR -> map -> field
+    under both settings: the same trial (scene, start, yaw, goal), scored, the setting named in the table."""
+    monkeypatch.chdir(REPO)
+    man = tmp_path / "m.yaml"
+    man.write_text(
+        yaml.safe_dump(
+            {
+                "methods": {"G5": ["checkpoints/generalist5/model_607.pt"]},
+                "table3": {"scene_seed": 0, "variants": 1, "kinds": ["hurdle-crouch"]},
+            }
+        )
+    )
+    script = _eval_table()
+    trials = {}
+    for setting in ("default", "harsh"):
+        out = tmp_path / setting
+        args = [f"manifest={man}", f"out={out}", "trials_per_scene=1", "perception=lidar"]
+        assert script.main([*args, f"perception_setting={setting}"]) == 0
+        (row,) = _rows(out)
+        assert row["table"] == "table3" and row["group"] == "hurdle-crouch" and row["success"] in ("0", "1")
+        assert 0.0 <= float(row["de"]) < 3.0
+        assert f"setting '{setting}'" in (out / "table3.md").read_text()
+        trials[setting] = {k: row[k] for k in ("scene", "goal", "start", "start_x", "start_y", "start_yaw")}
+    assert trials["default"] == trials["harsh"]
+    caplog.clear()
+    with caplog.at_level(logging.ERROR):
+        assert script.main([f"manifest={man}", f"out={tmp_path / 'bad'}", "perception=lidr"]) == 2
+        assert (
+            script.main([f"manifest={man}", f"out={tmp_path / 'bad'}", "perception=lidar", "perception_setting=x"]) == 2
+        )
+    errors = " ".join(r.getMessage() for r in caplog.records)
+    assert "perception must be ground_truth or lidar" in errors and "perception setting 'x'" in errors
+    assert not (tmp_path / "bad").exists()

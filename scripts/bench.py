@@ -1,5 +1,5 @@
-"""Benchmarks: ``python scripts/bench.py sim|fields|field_contact|train|learner|eval|gen|scale|soak|live`` (extra
-args go to the case)."""
+"""Benchmarks: ``python scripts/bench.py sim|fields|field_contact|train|learner|eval|gen|scale|soak|live|live_eval``
+(extra args go to the case)."""
 
 from __future__ import annotations
 
@@ -17,6 +17,7 @@ COMMANDS = {
     "scale": "cat.bench.scale",
     "soak": "cat.bench.soak",
     "live": "cat.bench.live",
+    "live_eval": "cat.bench.live_eval",
 }
 SCENE_TRAIN_FLAGS = ("--scenes", "--obstacles", "--scene-dir")
 """``train`` with any of these measures a scene set (``cat.bench.train_obstacles``) instead of flat ground."""

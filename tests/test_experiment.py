@@ -149,7 +149,7 @@ def test_bad_experiment_one_line_nothing_written(tmp_path, caplog, cells, extra,
     [
         ({"methods": {"Ours": "a"}, "table1": {}}, "row 'Ours' must be a list"),
         ({"methods": {"Ours": ["b"]}, "table1": {}}, "unknown cell 'b'"),
-        ({"methods": {"Ours": ["a"]}}, "needs table1: and/or table2:"),
+        ({"methods": {"Ours": ["a"]}}, "needs table1:, table2: and/or table3:"),
     ],
 )
 def test_bad_table_one_line_nothing_written(tmp_path, caplog, table, needle):

@@ -219,3 +219,36 @@ def test_eval_table_scores_a_shipped_policy_through_perception(tmp_path, monkeyp
     errors = " ".join(r.getMessage() for r in caplog.records)
     assert "perception must be ground_truth or lidar" in errors and "perception setting 'x'" in errors
     assert not (tmp_path / "bad").exists()
+
+
+def test_table3_recipe_differs_only_in_the_exteroceptive_block(tmp_path):
+    """experiment=table3: three students of the same four teachers, budget, seeds and network; their configs equal
+    generalist5's groups but for the student block; every table scores 4 types x >= 50 trials per cell, at the
+    ground truth and both perception settings."""
+    from cat.experiment.plan import Plan
+    from cat.experiment.spec import check_equal_budget, load_experiment
+    from cat.learning.hydra_cfg import load_config
+    from cat.learning.run_config import load_run_config
+
+    exp = load_experiment("table3")
+    plan = Plan(exp, str(tmp_path))
+    shipped = load_run_config(REPO / "checkpoints" / "generalist5" / "model_607.pt")
+    blocks = {}
+    for name, cell in exp.cells.items():
+        unit = plan.units[f"{name}@0"]
+        cfg = load_config(unit.base)
+        obs = cfg.task.observations
+        for group in ("student_proprio", "teacher", "route"):
+            assert obs[group] == shipped.task.observations[group], (name, group)
+        assert obs["student"].terms[0] == "goal_command" and len(obs["student"].terms) == 2
+        blocks[name] = obs["student"].terms[1]
+        assert cfg.task.noise == shipped.task.noise and cfg.algo.distill == shipped.algo.distill, name
+        assert len(cell.teachers) == 4 and all((REPO / t).is_file() for t in cell.teachers)
+        assert unit.iterations == plan.units["field@0"].iterations
+    assert blocks == {"field": "field_block_odometry", "voxel": "voxel_grid", "elevation": "elevation_map"}
+    settings = set()
+    for table in exp.tables.values():
+        check_equal_budget(exp, table)
+        assert table.table3 is not None and table.trials_per_scene * table.table3.get("variants", 10) >= 50
+        settings.add((table.perception, table.perception_setting))
+    assert {("lidar", "default"), ("lidar", "harsh")} <= settings

@@ -277,6 +277,8 @@ class Plan:
             out["table1"] = dict(table.table1)
         if table.table2 is not None:
             out["table2"] = dict(table.table2)
+        if table.table3 is not None:
+            out["table3"] = dict(table.table3)
         return out
 
     def table_dir(self, table: Table) -> Path:
@@ -285,7 +287,8 @@ class Plan:
     def table_hash(self, table: Table) -> str:
         ident = {
             "manifest": self.manifest(table),
-            "opts": [table.trials_per_scene, table.seed, table.max_envs, table.sim],
+            "opts": [table.trials_per_scene, table.seed, table.max_envs, table.sim]
+            + ([table.perception, table.perception_setting] if table.perception != "ground_truth" else []),
             "inputs": [self.identity(r) for r in self.table_refs(table) if r != "hold"],
         }
         return hashlib.sha256(json.dumps(ident, sort_keys=True, default=str).encode()).hexdigest()[:16]
@@ -303,4 +306,9 @@ class Plan:
             f"seed={table.seed}",
             f"max_envs={table.max_envs}",
             f"sim={table.sim}",
+            *(
+                [f"perception={table.perception}", f"perception_setting={table.perception_setting}"]
+                if table.perception != "ground_truth"
+                else []
+            ),
         ]

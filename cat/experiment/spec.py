@@ -86,10 +86,13 @@ class Table:
     methods: dict
     table1: dict | None = None
     table2: dict | None = None
+    table3: dict | None = None  # Table III's typical types (the manifest's table3)
     trials_per_scene: int = 10
     seed: int = 0
     max_envs: int = 256
     sim: str = "mujoco"
+    perception: str = "ground_truth"  # eval_table.py perception= (lidar: through the simulated LiDAR and map)
+    perception_setting: str = "default"  # with lidar: configs/eval/perception/<name>.yaml
     equal_budget: list[str] = field(default_factory=list)  # rows that may differ only in method (one cell each)
 
     def references(self) -> list[str]:
@@ -233,8 +236,10 @@ def _table(name: str, raw: dict) -> Table:
             raise ExperimentError(
                 f"{what}: row {row!r} must be a list of cells / checkpoints, or {{scene type: [...]}}, got {entries!r}"
             )
-    if raw.get("table1") is None and raw.get("table2") is None:
-        raise ExperimentError(f"{what}: needs table1: and/or table2:")
+    if raw.get("table1") is None and raw.get("table2") is None and raw.get("table3") is None:
+        raise ExperimentError(f"{what}: needs table1:, table2: and/or table3:")
+    if raw.get("perception", "ground_truth") not in ("ground_truth", "lidar"):
+        raise ExperimentError(f"{what}: perception must be ground_truth or lidar, got {raw['perception']!r}")
     rows = _as_list(f"{what}: equal_budget", raw.get("equal_budget"))
     for row in rows:
         if row not in raw["methods"]:

@@ -164,6 +164,25 @@ def test_live_block_before_any_map_is_free_space(scene):
     assert (voxel_grid(rt) == 0).all()
 
 
+def test_latency_and_odometry_drift(scene):
+    """A cycle's map reaches the policy latency_s of robot time after its scan; the odometry error is a random walk
+    from zero at each reset (std sigma sqrt(t)), and it moves the robot's own pose estimate."""
+    rt = _runtime(scene, LiveSettingCfg(latency_s=0.2, odom_drift_xy=0.05, odom_drift_yaw=0.02))
+    rt.perception.cycle(rt.snapshot())
+    assert rt.perception.latest_map is None
+    errors = []
+    for _ in range(30):  # 0.6 s on the gantry (no goal: physics paused, the clock and the drift run)
+        rt.step()
+        if rt.perception.latest_map is None:
+            assert rt.sim_time < 0.2 + 1e-9
+        est = rt.estimate()
+        errors.append(np.linalg.norm(est.root_pos[:2] - rt.data.qpos[:2]))
+    assert rt.perception.latest_map is not None
+    assert 0.0 < errors[-1] < 0.5 and len(set(errors)) > 1
+    rt.reset()
+    assert np.allclose(rt.estimate().root_pos[:2], rt.data.qpos[:2])
+
+
 def test_a_block_the_live_pipeline_cannot_build_is_refused_by_name():
     cfg = TrainCfg()
     cfg.task.observations["actor"].terms.append("base_lin_vel")  # privileged: no robot measures it

@@ -212,7 +212,7 @@ class Perception:
 
     def publish(self, now: float) -> None:
         """Make the results whose latency has passed at robot time ``now`` the latest ones."""
-        while self._pending and self._pending[0][0] <= now:
+        while self._pending and self._pending[0][0] <= now + 1e-6:  # robot time is a sum of control steps
             _, live, maps = self._pending.popleft()
             if live is not None:
                 self.latest = live

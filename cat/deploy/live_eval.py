@@ -123,6 +123,16 @@ class LiveTrials:
         spec.task = copy.deepcopy(spec.task)
         spec.task.success.radius, spec.task.success.time_s = radius, time_s
         results: dict[int, TrialResult] = {}
+        quiet = logging.getLogger("cat.deploy.runtime")  # one "goal set" line per trial would bury the progress bar
+        level = quiet.level
+        quiet.setLevel(max(level, logging.WARNING))
+        try:
+            self._run_scenes(spec, group, trials, time_s, seed, results, bar)
+        finally:
+            quiet.setLevel(level)
+        return [results[i] for i in range(len(trials))]
+
+    def _run_scenes(self, spec, group, trials, time_s, seed, results, bar) -> None:
         for s in sorted({t.scene for t in trials}):
             with contextlib.redirect_stdout(io.StringIO()):  # rsl_rl prints the network: stdout carries the tables
                 rt = Runtime(group.scenes[s], spec, deploy_cfg(self.setting, seed))
@@ -131,7 +141,6 @@ class LiveTrials:
                     results[i] = run_trial(rt, t, time_s, seed)
                     if bar is not None:
                         bar.update(1)
-        return [results[i] for i in range(len(trials))]
 
 
 def run_trial(rt: Runtime, trial: Trial, time_s: float, seed: int = 0) -> TrialResult:

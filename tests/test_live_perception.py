@@ -199,9 +199,13 @@ def _eval_table():
     return module
 
 
-def _rows(folder: Path) -> list[dict]:
-    with open(folder / "trials.csv") as f:
+def _rows_of(path: Path) -> list[dict]:
+    with open(path) as f:
         return list(csv.DictReader(f))
+
+
+def _rows(folder: Path) -> list[dict]:
+    return _rows_of(folder / "trials.csv")
 
 
 def test_eval_table_scores_a_shipped_policy_through_perception(tmp_path, monkeypatch, caplog):
@@ -271,3 +275,30 @@ def test_table3_recipe_differs_only_in_the_exteroceptive_block(tmp_path):
         assert table.table3 is not None and table.trials_per_scene * table.table3.get("variants", 10) >= 50
         settings.add((table.perception, table.perception_setting))
     assert {("lidar", "default"), ("lidar", "harsh")} <= settings
+
+
+def test_perception_sweep_scores_each_level_and_plots(tmp_path, monkeypatch, caplog):
+    """scripts/perception_sweep.py: one row per (axis, level, method) on the same trials, the plot written; a bad
+    axis refused by name, nothing written."""
+    monkeypatch.chdir(REPO)
+    man = tmp_path / "m.yaml"
+    man.write_text(yaml.safe_dump({"methods": {"Hold": ["hold"]}, "table3": {"variants": 1, "kinds": ["crouch-pass"]}}))
+    sweep = tmp_path / "s.yaml"
+    sweep.write_text(yaml.safe_dump({"base": "default", "axes": {"dropout": [0.0, 0.5]}}))
+    spec = importlib.util.spec_from_file_location("perception_sweep", REPO / "scripts" / "perception_sweep.py")
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    out = tmp_path / "out"
+    assert script.main([f"manifest={man}", f"out={out}", f"sweep={sweep}", "time_s=0.5"]) == 0
+    rows = _rows_of(out / "sweep.csv")
+    assert [(r["axis"], r["level"], r["method"], r["trials"]) for r in rows] == [
+        ("dropout", "0", "Hold", "1"),
+        ("dropout", "0.5", "Hold", "1"),
+    ]
+    assert (out / "perception_sweep.png").stat().st_size > 0
+    sweep.write_text(yaml.safe_dump({"axes": {"droput": [0.1]}}))
+    caplog.clear()
+    with caplog.at_level(logging.ERROR):
+        assert script.main([f"manifest={man}", f"out={tmp_path / 'bad'}", f"sweep={sweep}"]) == 2
+    assert "unknown axis 'droput'" in " ".join(r.getMessage() for r in caplog.records)
+    assert not (tmp_path / "bad").exists()

@@ -108,9 +108,8 @@ def check_live(run: MethodRun) -> None:
 class LiveTrials:
     """``evaluate``'s hook for ``perception=lidar``: checks policies and runs a column's trials through perception."""
 
-    def __init__(self, setting: str = "default"):
-        self.name = setting
-        self.setting = load_setting(setting)
+    def __init__(self, setting: str | LiveSettingCfg = "default"):
+        self.setting = load_setting(setting) if isinstance(setting, str) else setting
 
     def check(self, run: MethodRun) -> None:
         check_live(run)

@@ -1,7 +1,7 @@
 """Trials scored through the simulated perception (``scripts/eval_table.py perception=lidar``): Table III's setting.
 
 Each trial is the evaluation protocol's trial (``cat.eval.trials``: the same scene, goal, start pose and yaw as
-with ``perception=ground_truth``, scored by ``cat.eval.metrics``' rules on the true root) run by the click demo's
+with ``perception=ground_truth``, scored by ``cat.envs.trial_metrics``' rules on the true root) run by the click demo's
 runtime (``cat.deploy.runtime.Runtime``, lockstep): LiDAR scans at ``rate_hz`` -> log-odds map -> the policy's
 exteroceptive block from that map (HumanoidPF built on the window, or the voxel grid / elevation map tables of
 ``cat.envs.perception`` read from it), visible ``latency_s`` after each scan, with the setting's LiDAR noise,
@@ -31,8 +31,8 @@ from cat.deploy.lidar import LidarCfg
 from cat.deploy.perception import PerceptionCfg
 from cat.deploy.policy import PolicySpec
 from cat.deploy.runtime import DeployCfg, Runtime, _check_deployable
+from cat.envs.trial_metrics import TrialResult
 from cat.eval.manifest import ManifestError, MethodRun
-from cat.eval.metrics import TrialResult
 from cat.eval.runner import SceneGroup
 from cat.eval.trials import Trial
 from cat.learning.config import policy_model
@@ -150,7 +150,7 @@ def run_trial(rt: Runtime, trial: Trial, time_s: float, seed: int = 0) -> TrialR
     rt.perception.reset_map()
     rt.perception.lidar.scan_index = 0
     rt.deploy.trial_time_s = time_s
-    rt.set_goal(trial.goal_xyz[:2])
+    rt.set_goal(trial.goal_xyz, check=False)  # the protocol's goal, as the ground-truth path places it
     rt.perception.cycle(rt.snapshot())
     rt.perception.publish(float("inf"))  # what the standing robot saw before it starts
     steps = rt.trial.window

@@ -19,11 +19,9 @@ from typing import Any
 
 from omegaconf import OmegaConf
 
+from cat.errors import CliError
+
 log = logging.getLogger("cat")
-
-
-class CliError(ValueError):
-    """A bad command line or configuration value: printed as one line, exit code 2."""
 
 
 @dataclass

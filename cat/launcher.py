@@ -64,7 +64,7 @@ class ScriptJob:
 
 def run_script_job(path: str | Path, overrides: list[str]) -> int:
     """Load and run one job of a script; a bad input is one ERROR line and code 2 (as on the command line)."""
-    from cat.cli import CliError
+    from cat.errors import CliError
 
     script = load_script(path).SCRIPT
     log.info("job: %s %s", Path(path).name, " ".join(overrides))

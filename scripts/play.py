@@ -14,8 +14,8 @@ import sys
 
 from cat.cli import Script, dataclass_loader, run
 from cat.envs.scene_set import SceneSetError
+from cat.envs.trial_metrics import summarize
 from cat.eval.contacts import contact_line
-from cat.eval.metrics import summarize
 from cat.learning.play import PlayCfg, play_trials, scene_lines
 from cat.learning.runs import CheckpointError
 

@@ -1,4 +1,4 @@
-"""The trial rules (cat.eval.metrics) on constructed trajectories: exact SR / DE / reach time."""
+"""The trial rules (cat.envs.trial_metrics) on constructed trajectories: exact SR / DE / reach time."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import math
 import pytest
 import torch
 
-from cat.eval.metrics import TrialMetrics, horizontal_distance, score_trajectory, summarize
+from cat.envs.trial_metrics import TrialMetrics, horizontal_distance, score_trajectory, summarize
 from cat.eval.trials import flat_trials, scene_trials
 from cat.terrain import typical_variants
 

@@ -16,8 +16,8 @@ import yaml
 from cat.envs.config import EnvCfg
 from cat.envs.field_source import FieldSample
 from cat.envs.mdp import rewards as rew
+from cat.envs.trial_metrics import TrialResult, summarize
 from cat.eval.manifest import ManifestError, load_manifest
-from cat.eval.metrics import TrialResult, summarize
 from cat.eval.runner import run_scene_group
 from cat.learning.hydra_cfg import ConfigError, load_config
 from cat.learning.play import PlayCfg, play, play_trials, scene_lines

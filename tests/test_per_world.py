@@ -11,16 +11,10 @@ from mujoco import batch
 
 from cat.envs.config import EnvCfg
 from cat.envs.scene import COLLISION_SENSOR
-from cat.envs.scene_models import (
-    PAD_BODY,
-    SceneModelError,
-    WorldModels,
-    build_scene_models,
-    data_layout,
-    layout_classes,
-)
+from cat.envs.scene_models import WorldModels, build_scene_models, layout_classes
 from cat.envs.scene_set import SceneSet, SceneSetError, scene_fields
 from cat.envs.sim import check_backend
+from cat.envs.sim.layout import PAD_BODY, SceneModelError, data_layout
 from cat.envs.sim.mujoco_backend import MujocoBackend
 from cat.envs.traversal_env import TraversalEnv
 from cat.terrain import typical_variants

@@ -26,7 +26,7 @@ class HeadlessResult:
 
 def run_headless(runtime: Runtime, goal_xy, time_limit: float, recorder=None) -> HeadlessResult:
     """Send the robot to ``goal_xy`` (``GoalError`` if it cannot go there) and run until done; scored by the
-    evaluation protocol (``cat.eval.metrics``) with ``time_limit`` as the trial window."""
+    evaluation protocol (``cat.envs.trial_metrics``) with ``time_limit`` as the trial window."""
     runtime.deploy.trial_time_s = time_limit
     runtime.set_goal(goal_xy)
     t0 = runtime.outcome.goal_set_time

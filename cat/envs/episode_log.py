@@ -12,7 +12,7 @@ if TYPE_CHECKING:
 
 def episode_log(env: TraversalEnv, ids: torch.Tensor) -> dict[str, torch.Tensor]:
     """Means over the ended episodes ``ids``: each reward term per second of episode, the trial metrics
-    (``cat.eval.metrics``: success, reached, distance error, collision, fall) and the termination causes."""
+    (``cat.envs.trial_metrics``: success, reached, distance error, collision, fall) and the termination causes."""
     length_s = (env.step_count[ids].to(torch.float32) * env.dt).clamp_min(env.dt)
     out = {f"Episode_Reward/{k}": (v[ids] / length_s).mean() for k, v in env.episode_sums.items()}
     tr = env.trial

@@ -9,12 +9,11 @@ import mujoco
 import numpy as np
 
 from cat.envs.robot import OBSTACLE_BODY, RobotCfg, compile_model, robot_spec
+from cat.envs.sim.base import COLLISION_SENSOR, PART_SENSOR_PREFIX
 from cat.terrain.mujoco_export import obstacle_geom_ids
 
 if TYPE_CHECKING:
     from cat.envs.config import EnvCfg
-
-COLLISION_SENSOR = "robot_obstacle_contact"
 
 
 def query_pos_sensor(name: str) -> str:
@@ -32,9 +31,6 @@ def foot_contact_sensor(foot_body: str) -> str:
 def foot_axis_sensor(foot_body: str) -> str:
     """The foot body's x axis in the world frame (heel-to-toe direction)."""
     return f"xaxis_{foot_body}"
-
-
-PART_SENSOR_PREFIX = "obstacle_contact_"
 
 
 def part_obstacle_sensor(body: str) -> str:

@@ -46,7 +46,7 @@ from cat.envs.scene import (
     query_vel_sensor,
 )
 from cat.envs.sim import check_backend, make_backend
-from cat.eval.metrics import TrialMetrics, horizontal_distance
+from cat.envs.trial_metrics import TrialMetrics, horizontal_distance
 from cat.fields import FieldCfg, humanoid_pf
 
 
@@ -378,7 +378,7 @@ class TraversalEnv(VecEnv):
 
     # --- episode bookkeeping -----------------------------------------------------------------------------
     def _track_success(self) -> None:
-        """The trial metrics (``cat.eval.metrics``) over the first ``success.time_s`` of each episode."""
+        """The trial metrics (``cat.envs.trial_metrics``) over the first ``success.time_s`` of each episode."""
         self.trial.update(self.step_count, self.goal_distance, self.state.collision, self._fell())
 
     def _fell(self) -> torch.Tensor:

@@ -23,8 +23,8 @@ from tqdm import tqdm
 
 from cat.checkpoint_io import CheckpointError, UnsafeCheckpointError
 from cat.envs.config import SuccessCfg
+from cat.envs.trial_metrics import TrialResult
 from cat.eval.manifest import Manifest, ManifestError, MethodRun, load_manifest
-from cat.eval.metrics import TrialResult
 from cat.eval.runner import EvalCfg, HoldPolicy, SceneGroup, make_eval_env, run_trials
 from cat.eval.table import CSV_COLUMNS, render_latex, render_markdown
 from cat.eval.trials import Trial, scene_trials
@@ -49,6 +49,7 @@ class EvalTableCfg:
     radius: float = 0.1  # success radius (paper: 0.1 m)
     perception: str = "ground_truth"  # ground_truth (the env's terms) | lidar (LiDAR -> map -> block, per trial)
     perception_setting: str = "default"  # with lidar: configs/eval/perception/<name>.yaml (default | harsh) or a path
+    live_workers: int = 1  # with lidar: processes running a column's scenes in parallel (one trial each at a time)
 
 
 def scene_groups(manifest: Manifest) -> dict[str, list[SceneGroup]]:

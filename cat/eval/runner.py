@@ -2,7 +2,7 @@
 
 A batch of up to N trials is placed with ``TraversalEnv.reset_to`` (env i gets trial i of the batch), the env
 steps the trial window (250 control steps for 5 s at 50 Hz) with auto-reset off, and each env's
-``TrialMetrics`` (``cat.eval.metrics``, the same object the training log reads) gives the result. Envs left
+``TrialMetrics`` (``cat.envs.trial_metrics``, the same object the training log reads) gives the result. Envs left
 over in the last batch keep running their previous (finished) trial and are not read.
 
 Evaluation settings (``EvalCfg``): pushes and domain randomisation off (a nominal robot, as the paper's
@@ -28,7 +28,7 @@ from cat.envs.episodes import EpisodeCfg
 from cat.envs.scene_set import SceneSet, SceneSetError, scene_fields, scene_folders
 from cat.envs.scene_source import SceneSource, eval_scene_source
 from cat.envs.traversal_env import TraversalEnv
-from cat.eval.metrics import TrialResult
+from cat.envs.trial_metrics import TrialResult
 from cat.eval.trials import Trial
 from cat.fields import Field
 from cat.terrain import Scene, typical_variants, warmup_variants

@@ -1,7 +1,7 @@
 """Roll out a checkpoint on the evaluation protocol (``cat.eval``) and report SR / DE / collision / fall rates.
 
 ``episodes`` trials are the first ones of the run's trial list (start-major: spread over its scenes and
-goals), each run for ``success.time_s`` from its own reset with no auto-reset, scored by ``cat.eval.metrics``.
+goals), each run for ``success.time_s`` from its own reset with no auto-reset, scored by ``cat.envs.trial_metrics``.
 The scenes are the run's own (its ``task.scene_seed`` / ``task.scene_dir``) unless ``scene_seed`` or
 ``scene_dir`` say otherwise.
 """
@@ -14,8 +14,8 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from cat.envs.trial_metrics import Summary, TrialResult, summarize
 from cat.eval.contacts import FirstContacts
-from cat.eval.metrics import Summary, TrialResult, summarize
 from cat.eval.runner import EvalCfg, make_eval_env, run_scene_group, run_trials
 from cat.eval.trials import Trial, first_trials, flat_trials, scene_trials
 from cat.learning.runs import load_policy, load_run_config, resolve_checkpoint

@@ -7,8 +7,7 @@ from typing import TYPE_CHECKING
 
 import mujoco
 
-from cat.envs.scene import COLLISION_SENSOR, PART_SENSOR_PREFIX
-from cat.envs.sim.base import PhysicsBackend
+from cat.envs.sim.base import COLLISION_SENSOR, PART_SENSOR_PREFIX, PhysicsBackend
 
 if TYPE_CHECKING:
     from cat.envs.scene_models import WorldModels

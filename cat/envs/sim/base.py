@@ -24,6 +24,12 @@ import mujoco
 import numpy as np
 import torch
 
+COLLISION_SENSOR = "robot_obstacle_contact"
+"""The robot-obstacle contact count sensor the scene builder adds (``cat.envs.scene``); reported as its maximum
+over a control step's substeps (``max_sensors``)."""
+PART_SENSOR_PREFIX = "obstacle_contact_"
+"""Prefix of the per-body obstacle contact sensors (``cat.envs.scene.part_obstacle_sensor``), max over substeps too."""
+
 
 @dataclass
 class SensorSlice:

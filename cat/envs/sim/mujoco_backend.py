@@ -8,7 +8,7 @@ of it is a fatal MuJoCo error (``mj_stackAlloc: out of memory``), never a silent
 Per-world models (``set_model_table``, ``sim.per_world_scenes``): world i steps ``table[model_ids[i]]``, and
 ``assign_models`` swaps that pointer (a scene change at reset, no rebuild). ``rollout`` shares one ``MjData`` per
 thread among the worlds it steps, so the table's models are grouped by ``MjData`` layout
-(``cat.envs.scene_models.data_layout``) and each layout class present runs as its own rollout, with its own
+(``cat.envs.sim.layout.data_layout``) and each layout class present runs as its own rollout, with its own
 ``MjData``, on that class's worlds (gathered, stepped, scattered back).
 """
 
@@ -24,6 +24,7 @@ import torch
 from mujoco import rollout
 
 from cat.envs.sim.base import PhysicsBackend, as_index, state_layout
+from cat.envs.sim.layout import check_compatible, check_same_layout, data_layout
 
 
 def set_model_gains(m: mujoco.MjModel, kp: np.ndarray, kd: np.ndarray) -> None:
@@ -154,8 +155,6 @@ class MujocoBackend(PhysicsBackend):
     def set_model_table(self, models: Sequence[mujoco.MjModel]) -> None:
         """Let worlds step models of ``models`` (all with this backend's state, control and sensor sizes); every
         world starts on ``models[0]``. ``assign_models`` picks each world's model."""
-        from cat.envs.scene_models import check_compatible, check_same_layout, data_layout
-
         if self._models is not None:
             raise RuntimeError("set_model_table after per-world gains or masses were set")
         models = list(models)

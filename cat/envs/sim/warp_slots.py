@@ -33,7 +33,7 @@ import torch
 
 from cat.envs.robot import OBSTACLE_BODY, RobotCfg, robot_spec
 from cat.envs.scene import env_spec, strip_visual_meshes
-from cat.envs.scene_models import PAD_BODY, SceneModelError, check_compatible
+from cat.envs.sim.layout import PAD_BODY, SceneModelError, check_compatible
 from cat.terrain.mujoco_export import obstacle_geom_ids
 
 log = logging.getLogger(__name__)

@@ -23,7 +23,7 @@ def _job(cfg: EvalTableCfg) -> int:
     if cfg.perception == "lidar":
         from cat.deploy.live_eval import LiveTrials
 
-        live = LiveTrials(cfg.perception_setting)
+        live = LiveTrials(cfg.perception_setting, cfg.live_workers)
     _, files = evaluate(cfg, live)
     write_atomically(cfg.out, files)
     for name in sorted(files):

@@ -302,3 +302,19 @@ def test_perception_sweep_scores_each_level_and_plots(tmp_path, monkeypatch, cap
         assert script.main([f"manifest={man}", f"out={tmp_path / 'bad'}", f"sweep={sweep}"]) == 2
     assert "unknown axis 'droput'" in " ".join(r.getMessage() for r in caplog.records)
     assert not (tmp_path / "bad").exists()
+
+
+def test_parallel_workers_give_the_same_trials(tmp_path, monkeypatch):
+    """live_workers=2 shares the scenes out to two processes; every trial's result is the one of live_workers=1."""
+    monkeypatch.chdir(REPO)
+    man = tmp_path / "m.yaml"
+    man.write_text(yaml.safe_dump({"methods": {"Hold": ["hold"]}, "table3": {"variants": 2, "kinds": ["crouch-pass"]}}))
+    script = _eval_table()
+    csvs = []
+    for workers in (1, 2):
+        out = tmp_path / f"w{workers}"
+        args = [f"manifest={man}", f"out={out}", "trials_per_scene=1", "time_s=1.0", "perception=lidar"]
+        args.append(f"live_workers={workers}")
+        assert script.main(args) == 0
+        csvs.append((out / "trials.csv").read_text())
+    assert csvs[0] == csvs[1] and len(_rows(tmp_path / "w1")) == 2

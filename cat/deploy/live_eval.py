@@ -19,7 +19,9 @@ import contextlib
 import copy
 import io
 import logging
+import multiprocessing
 import threading
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, fields
 from pathlib import Path
 
@@ -108,8 +110,13 @@ def check_live(run: MethodRun) -> None:
 class LiveTrials:
     """``evaluate``'s hook for ``perception=lidar``: checks policies and runs a column's trials through perception."""
 
-    def __init__(self, setting: str | LiveSettingCfg = "default"):
+    def __init__(self, setting: str | LiveSettingCfg = "default", workers: int = 1):
+        """``workers`` > 1: scenes are shared out to that many processes (a trial's result does not depend on
+        where or after what it runs: every trial starts from a fresh map, pose, policy state and seeded draws)."""
         self.setting = load_setting(setting) if isinstance(setting, str) else setting
+        if workers < 1:
+            raise ValueError(f"live workers must be >= 1, got {workers}")
+        self.workers = workers
 
     def check(self, run: MethodRun) -> None:
         check_live(run)
@@ -132,14 +139,35 @@ class LiveTrials:
         return [results[i] for i in range(len(trials))]
 
     def _run_scenes(self, spec, group, trials, time_s, seed, results, bar) -> None:
-        for s in sorted({t.scene for t in trials}):
-            with contextlib.redirect_stdout(io.StringIO()):  # rsl_rl prints the network: stdout carries the tables
-                rt = Runtime(group.scenes[s], spec, deploy_cfg(self.setting, seed))
-            for i, t in enumerate(trials):
-                if t.scene == s:
-                    results[i] = run_trial(rt, t, time_s, seed)
-                    if bar is not None:
-                        bar.update(1)
+        jobs = [
+            (spec, group.scenes[s], [(i, t) for i, t in enumerate(trials) if t.scene == s], time_s, seed, self.setting)
+            for s in sorted({t.scene for t in trials})
+        ]
+        if self.workers == 1 or len(jobs) == 1:
+            for job in jobs:
+                results.update(scene_trials_job(*job, bar=bar))
+            return
+        ctx = multiprocessing.get_context("spawn")  # no fork of a process holding torch / Warp threads
+        with ProcessPoolExecutor(max_workers=min(self.workers, len(jobs)), mp_context=ctx) as pool:
+            for done in as_completed([pool.submit(scene_trials_job, *job) for job in jobs]):
+                part = done.result()
+                results.update(part)
+                if bar is not None:
+                    bar.update(len(part))
+
+
+def scene_trials_job(spec, scene, items, time_s: float, seed: int, setting: LiveSettingCfg, bar=None) -> dict:
+    """{trial index: result} of ``items`` ((index, trial) of one scene) on one runtime (also a worker's job)."""
+    torch.set_num_threads(1)
+    logging.getLogger("cat.deploy.runtime").setLevel(logging.WARNING)
+    with contextlib.redirect_stdout(io.StringIO()):  # rsl_rl prints the network: stdout carries the tables
+        rt = Runtime(scene, spec, deploy_cfg(setting, seed))
+    out = {}
+    for i, t in items:
+        out[i] = run_trial(rt, t, time_s, seed)
+        if bar is not None:
+            bar.update(1)
+    return out
 
 
 def run_trial(rt: Runtime, trial: Trial, time_s: float, seed: int = 0) -> TrialResult:

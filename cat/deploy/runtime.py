@@ -1,15 +1,16 @@
 """The deployed robot in one MuJoCo world: estimate -> FK -> live field -> observation -> policy -> PD targets.
 
-The simulator (MuJoCo C, one ``MjData``) plays the world and the sensors. The controller sees only what a G1
-has: IMU (gyro, orientation), joint encoders, an odometry pose (here the simulator's pelvis pose plus optional
-noise: the stand-in for the paper's LiDAR-inertial odometry) and the live HumanoidPF from its own LiDAR map
-(``cat.deploy.perception``). The observation groups the policy reads (``PolicySpec.obs_groups``: the actor, or
-a distilled student) are built by the env's own ``ObservationGroups`` (noise off: same terms, same history
-stacking) on a one-robot context, the field block by the same ``field_obs``, and actions go through the same
-``apply_actions``. Only terms declared ``deployable`` (``cat.envs.mdp.observations``) are computed; they read
-the env contract (``cat.envs.mdp.context.TermContext``), which this class provides. The policy is a checkpoint
-or an exported ONNX file (``cat.deploy.policy``); an ONNX file whose metadata differs from this runtime's layout
-is refused.
+The simulator (MuJoCo C, one ``MjData``) plays the world and the sensors. The controller sees only what a G1 has:
+IMU (gyro, orientation), joint encoders, an odometry pose (here the simulator's pelvis pose plus optional noise and
+drift: the stand-in for the paper's LiDAR-inertial odometry) and its own LiDAR map (``cat.deploy.perception``): the
+live HumanoidPF built on it, or, for a policy reading a voxel grid or an elevation map, those maps from it through
+the env's own tables (only the block the policy reads is built). The observation groups the policy reads
+(``PolicySpec.obs_groups``: the actor, or a distilled student) are built by the env's own ``ObservationGroups``
+(noise off: same terms, same history stacking) on a one-robot context, the field block by the same ``field_obs``,
+and actions go through the same ``apply_actions``. Only terms declared ``deployable``
+(``cat.envs.mdp.observations``) are computed; they read the env contract (``cat.envs.mdp.context.TermContext``),
+which this class provides. The policy is a checkpoint or an exported ONNX file (``cat.deploy.policy``); an ONNX file
+whose metadata differs from this runtime's layout is refused.
 """
 
 from __future__ import annotations

@@ -243,7 +243,13 @@ def test_shipped_recipes_compose_the_shipped_configs(tmp_path):
         assert {k: (mine.get(k), theirs.get(k)) for k in keys if mine.get(k) != theirs.get(k)} == {}, name
 
 
-def test_a_spent_sitting_leaves_the_rest_for_the_next(tmp_path, caplog):
+def test_a_spent_sitting_leaves_the_rest_for_the_next(tmp_path, caplog, monkeypatch):
+    import itertools
+
+    import cat.experiment.runner as runner
+
+    ticks = itertools.count(0.0, 1.0)  # each reading of the sitting's clock one second later: 0.6 ms is spent
+    monkeypatch.setattr(runner, "clock", lambda: next(ticks))
     exp = _write(tmp_path, {"prior": {"task": "flat", "iterations": 1}, "spec": {"init": "prior", "iterations": 1}})
     code, errors = _experiment([f"experiment={exp}", f"root={tmp_path / 'exps'}", "max_minutes=0.00001"], caplog)
     assert code == 0 and not errors

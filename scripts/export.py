@@ -1,7 +1,7 @@
 """Export a run's policy to one self-contained ONNX file (observation normaliser baked in, deployment metadata).
 
 ``python scripts/export.py checkpoint=<model_<it>.pt | run folder> out=policy.onnx [force=true]`` prints one line:
-``wrote <out> (<mlp|lstm>, obs <n> -> actions <m>, <size> KB); onnxruntime vs torch max|d action|=<x> ...``.
+``wrote <out> (<mlp|lstm>, obs <n> -> actions <m>, <size> KB); onnxruntime vs torch max|d action|/max(1,|a|)=<x> ...``.
 The file drives ``scripts/click_and_traverse.py checkpoint=policy.onnx``. See docs/export.md.
 """
 

@@ -40,7 +40,7 @@ from cat.learning.run_config import load_run_config
 log = logging.getLogger("export")
 
 OPSET = 18
-PARITY_TOL = 1e-5  # max |action difference| onnxruntime vs torch accepted by the export's own check
+PARITY_TOL = 1e-5  # max |action difference| / max(1, |action|), onnxruntime vs torch, accepted by the export's check
 
 
 @dataclass
@@ -55,7 +55,7 @@ class ExportCfg:
 class ExportResult:
     path: Path
     metadata: PolicyMetadata
-    max_abs_diff: float  # onnxruntime vs torch on the check's observations
+    max_abs_diff: float  # onnxruntime vs torch on the check's observations: max |d action| / max(1, |action|)
     samples: int
 
     def line(self) -> str:
@@ -63,7 +63,7 @@ class ExportResult:
         size = self.path.stat().st_size / 1024
         return (
             f"wrote {self.path} ({m.policy_kind}, obs {m.obs_dim} -> actions {m.num_actions}, {size:.0f} KB); "
-            f"onnxruntime vs torch max|d action|={self.max_abs_diff:.2e} on {self.samples} observations"
+            f"onnxruntime vs torch max|d action|/max(1,|a|)={self.max_abs_diff:.2e} on {self.samples} observations"
         )
 
 
@@ -118,16 +118,22 @@ def _onnx_bytes(model) -> tuple[bytes, str, dict[str, list[int]], list[str], lis
 
 
 def parity(model, session, meta: PolicyMetadata, obs: torch.Tensor) -> float:
-    """Max |action difference| between ``model`` (torch) and ``session`` (onnxruntime) on ``obs`` (T, obs_dim):
-    one batch for an MLP; for a recurrent policy, T steps of a batch of one with the state carried."""
+    """Max action difference between ``model`` (torch) and ``session`` (onnxruntime) on ``obs`` (T, obs_dim),
+    each |difference| over max(1, |torch action|): absolute for actions within [-1, 1], relative beyond (fp32
+    rounding grows with the output's magnitude). One batch for an MLP; for a recurrent policy, T steps of a
+    batch of one with the state carried."""
     ort, ref = OnnxPolicy(session, meta), TorchPolicy(model, meta.obs_groups)
     split = _split_groups(obs, meta)
+
+    def diff(a: torch.Tensor, b: torch.Tensor) -> float:
+        return float(((a - b).abs() / b.abs().clamp_min(1.0)).max())
+
     with torch.inference_mode():
         if meta.recurrent_state:
             ref.reset()
             ort.reset()
-            return max(float((ort(s) - ref(s)).abs().max()) for s in (split[t : t + 1] for t in range(len(obs))))
-        return float((ort(split) - ref(split)).abs().max())
+            return max(diff(ort(s), ref(s)) for s in (split[t : t + 1] for t in range(len(obs))))
+        return diff(ort(split), ref(split))
 
 
 def _split_groups(obs: torch.Tensor, meta: PolicyMetadata) -> TensorDict:

@@ -11,10 +11,10 @@ import torch
 
 from cat.envs.config import EnvCfg, NoiseCfg
 from cat.envs.mdp import observations as obs_module
-from cat.envs.mdp.context import CONTEXT_FIELDS, DEPLOY_STATE
+from cat.envs.mdp.context import CONTEXT_FIELDS, DEPLOY_STATE, SimState
 from cat.envs.mdp.registry import OBS_TERMS
 from cat.envs.obs_groups import term_names
-from cat.envs.traversal_env import SimState, TraversalEnv
+from cat.envs.traversal_env import TraversalEnv
 
 ODOMETRY_NOISE = {"odometry_xy", "odometry_yaw"}  # drift of field_block_odometry, not a term's value noise
 

@@ -35,12 +35,12 @@ from cat.envs.config import EnvCfg
 from cat.envs.math_utils import yaw_from_quat, yaw_quat
 from cat.envs.mdp import terminations as term_terms
 from cat.envs.mdp.actions import apply_actions, soft_joint_limits
+from cat.envs.mdp.context import SimState
 from cat.envs.mdp.field_obs import field_obs
 from cat.envs.mdp.registry import OBS_TERMS
 from cat.envs.obs_groups import ObservationGroups, resolve_groups
 from cat.envs.robot import RobotCfg, home_qpos, load_robot_cfg
 from cat.envs.scene import COLLISION_SENSOR, build_env_model
-from cat.envs.traversal_env import SimState
 from cat.envs.trial_metrics import TrialMetrics, horizontal_distance
 from cat.fields import FieldCfg, humanoid_pf
 from cat.terrain import Scene

@@ -9,7 +9,7 @@ goal, gait clock, HumanoidPF block; ``critic``: the actor terms without noise + 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import fields
 
 import torch
 from rsl_rl.env import VecEnv
@@ -28,6 +28,7 @@ from cat.envs.mdp import rewards as rew_terms
 from cat.envs.mdp import terminations as term_terms
 from cat.envs.mdp.actions import apply_actions, soft_joint_limits
 from cat.envs.mdp.commands import command_source, velocity_command
+from cat.envs.mdp.context import SimState
 from cat.envs.mdp.field_obs import field_obs
 from cat.envs.mdp.registry import active_rewards, reward_fn
 from cat.envs.obs_groups import ObservationGroups, lookup_term
@@ -48,28 +49,6 @@ from cat.envs.scene import (
 from cat.envs.sim import check_backend, make_backend
 from cat.envs.trial_metrics import TrialMetrics, horizontal_distance
 from cat.fields import FieldCfg, humanoid_pf
-
-
-@dataclass
-class SimState:
-    """Per-step robot state in float32 (world frame unless noted)."""
-
-    root_pos: torch.Tensor
-    root_quat: torch.Tensor
-    root_lin_vel: torch.Tensor
-    yaw: torch.Tensor
-    gyro: torch.Tensor  # pelvis frame
-    gravity: torch.Tensor  # pelvis frame
-    joint_pos: torch.Tensor
-    joint_vel: torch.Tensor
-    link_pos: torch.Tensor  # (N, 13, 3) query links
-    link_vel: torch.Tensor
-    foot_pos: torch.Tensor  # (N, 2, 3)
-    foot_vel: torch.Tensor
-    foot_axis: torch.Tensor  # (N, 2, 3) each foot's heel-to-toe (x) axis
-    foot_contact: torch.Tensor  # (N, 2) bool
-    collision: torch.Tensor  # (N,) bool: any robot-obstacle contact (success rule, metrics, penalty)
-    hard_collision: torch.Tensor  # (N,) bool: a contact that exerts force (ends the episode under on_collision)
 
 
 class TraversalEnv(VecEnv):

@@ -9,13 +9,36 @@ term computes the same from a context holding only these, and the runtime provid
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol
 
 import torch
 
 if TYPE_CHECKING:
     from cat.envs.config import EnvCfg
-    from cat.envs.traversal_env import SimState
+
+
+@dataclass
+class SimState:
+    """Per-step robot state in float32 (world frame unless noted)."""
+
+    root_pos: torch.Tensor
+    root_quat: torch.Tensor
+    root_lin_vel: torch.Tensor
+    yaw: torch.Tensor
+    gyro: torch.Tensor  # pelvis frame
+    gravity: torch.Tensor  # pelvis frame
+    joint_pos: torch.Tensor
+    joint_vel: torch.Tensor
+    link_pos: torch.Tensor  # (N, 13, 3) query links
+    link_vel: torch.Tensor
+    foot_pos: torch.Tensor  # (N, 2, 3)
+    foot_vel: torch.Tensor
+    foot_axis: torch.Tensor  # (N, 2, 3) each foot's heel-to-toe (x) axis
+    foot_contact: torch.Tensor  # (N, 2) bool
+    collision: torch.Tensor  # (N,) bool: any robot-obstacle contact (success rule, metrics, penalty)
+    hard_collision: torch.Tensor  # (N,) bool: a contact that exerts force (ends the episode under on_collision)
+
 
 DEPLOY_STATE = (
     "root_pos",  # odometry position (world) [m]

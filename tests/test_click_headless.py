@@ -73,7 +73,7 @@ def test_trained_flat_policy_reaches_goal():
 
 def _write_checkpoint(path: Path, actor_state: dict | None) -> Path:
     """A run folder: config.yaml of a flat task, and a checkpoint (``None``: garbage bytes)."""
-    from cat.learning.config import TrainCfg
+    from cat.run.config import TrainCfg
 
     path.mkdir(parents=True, exist_ok=True)
     (path / "config.yaml").write_text(OmegaConf.to_yaml(OmegaConf.structured(TrainCfg())))
@@ -91,7 +91,7 @@ def test_policy_checkpoint_drives_robot(tmp_path, capsys):
 
     from cat.envs.config import EnvCfg
     from cat.envs.traversal_env import TraversalEnv
-    from cat.learning.config import AlgoCfg, runner_cfg
+    from cat.run.config import AlgoCfg, runner_cfg
 
     env = TraversalEnv(EnvCfg(num_envs=1))
     cls, cfg = resolve_class(runner_cfg(AlgoCfg())["actor"])

@@ -10,9 +10,10 @@ import pytest
 import torch
 
 from cat.envs.config import ACTOR_TERMS, EnvCfg, ObsGroupCfg
-from cat.learning.config import AlgoCfg, DistillCfg, TrainCfg, policy_model
 from cat.learning.distill import MultiTeacher, TeacherError, check_teachers, distill_runner_cfg, load_specialists
-from cat.learning.runs import load_policy, make_env, make_runner, resume_config, save_config, train, validate_train_cfg
+from cat.learning.runs import make_env, make_runner, resume_config, save_config, train, validate_train_cfg
+from cat.run.config import AlgoCfg, DistillCfg, TrainCfg, policy_model
+from cat.run.policy import load_policy
 
 KINDS = ["hurdle-crouch", "side-pass"]
 

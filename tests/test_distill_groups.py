@@ -5,8 +5,8 @@ from __future__ import annotations
 import pytest
 import trimesh
 
-from cat.learning.config import TrainCfg
 from cat.learning.distill import TeacherError, teacher_groups
+from cat.run.config import TrainCfg
 from cat.terrain import Scene
 
 

@@ -23,8 +23,8 @@ from cat.deploy.metadata import LAYOUT_KEYS, PolicyFileError, PolicyMetadata, la
 from cat.deploy.policy import load_policy, policy_spec
 from cat.envs.config import ACTOR_TERMS, EnvCfg, ObsGroupCfg, default_obs_groups
 from cat.fields import FieldCfg
-from cat.learning.config import AlgoCfg, DistillCfg, TrainCfg, policy_model
 from cat.learning.runs import load_run_config, save_config
+from cat.run.config import AlgoCfg, DistillCfg, TrainCfg, policy_model
 
 REPO = Path(__file__).resolve().parents[1]
 SHIPPED = REPO / "checkpoints" / "flat" / "model_501.pt"

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from cat.learning.config import TrainCfg
 from cat.learning.hydra_cfg import ConfigError, load_config
+from cat.run.config import TrainCfg
 
 REPO = Path(__file__).resolve().parents[1]
 

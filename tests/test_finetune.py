@@ -8,10 +8,10 @@ import pytest
 import torch
 
 from cat.envs.config import ACTOR_TERMS, EnvCfg, ObsGroupCfg
-from cat.learning.config import AlgoCfg, DistillCfg, TrainCfg, policy_model
 from cat.learning.finetune import install_critic_warmup
 from cat.learning.hydra_cfg import load_config
 from cat.learning.runs import make_env, make_runner, save_config, train, validate_train_cfg
+from cat.run.config import AlgoCfg, DistillCfg, TrainCfg, policy_model
 
 STUDENT_GROUPS = ["student_proprio", "student"]
 

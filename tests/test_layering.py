@@ -6,10 +6,12 @@ too); imports under ``if TYPE_CHECKING:`` are left out (annotations only). Two r
 (a) **No cycles**: no set of modules that import each other, directly or through others.
 (b) **Layers point down**, in the order of issue 29::
 
-        fields -> terrain -> physics (cat/envs/sim) -> envs -> viz -> eval -> learning -> deploy -> top
+        fields -> terrain -> physics (cat/envs/sim) -> envs -> viz -> run -> eval -> learning -> deploy -> top
 
     A module may import its own layer and any layer before it. ``viz`` (rerun recording of rollouts, used by
-    play and the demo; it imports no other layer) sits just above envs, whose rollouts it draws. On top, one
+    play and the demo; it imports no other layer) sits just above envs, whose rollouts it draws. ``run`` (what a
+    training run leaves behind: its config schema, config.yaml and policy network) sits below ``eval``, which
+    plays checkpoints, and ``learning``, which writes them. On top, one
     rank: ``bench`` (the benchmarks, ``cat/bench``), ``experiment`` (the job runner of ``scripts/experiment.py``)
     and any other top-level module that is not a utility; ``scripts/`` are above all (not parsed here).
 
@@ -31,7 +33,20 @@ from pathlib import Path
 
 CAT = Path(__file__).resolve().parents[1] / "cat"
 
-LAYERS = ("fields", "terrain", "physics", "envs", "viz", "eval", "learning", "deploy", "bench", "experiment", "app")
+LAYERS = (
+    "fields",
+    "terrain",
+    "physics",
+    "envs",
+    "viz",
+    "run",
+    "eval",
+    "learning",
+    "deploy",
+    "bench",
+    "experiment",
+    "app",
+)
 TOP = {"bench", "experiment", "app"}  # one rank: on top of the product layers, like scripts/
 UTILITIES = {"cat", "cat.cli", "cat.errors", "cat.launcher", "cat.checkpoint_io", "cat.checkpoint_convert"}
 
@@ -40,16 +55,7 @@ KNOWN_CYCLES: dict[frozenset[str], str] = {}
 
 # Upward imports (importer, imported) that remain, with why. Module names, not packages, so a new upward import
 # from another module of the same package is caught.
-KNOWN_UPWARD: dict[tuple[str, str], str] = {
-    # the physics layer reads the env's scene composition and robot description (issue 29: hand them in)
-    ("cat.envs.sim.warp_slots", "cat.envs.robot"): "robot_spec and OBSTACLE_BODY to build slot models",
-    ("cat.envs.sim.warp_slots", "cat.envs.scene"): "env_spec / strip_visual_meshes to compose slot models",
-    # evaluation reads run configs (TrainCfg, policy_model) and builds policies with learning's loader: the
-    # config schema and load_policy belong below eval
-    ("cat.eval.evaluate", "cat.learning.runs"): "load_policy",
-    ("cat.eval.manifest", "cat.learning.config"): "TrainCfg and policy_model of a listed checkpoint",
-    ("cat.eval.manifest", "cat.learning.run_config"): "load_run_config of a listed checkpoint",
-}
+KNOWN_UPWARD: dict[tuple[str, str], str] = {}
 
 
 def _layer(module: str) -> str | None:

@@ -39,7 +39,7 @@ from cat.envs.mdp.observations import elevation_map, voxel_grid
 from cat.envs.perception import ScenePerception, map_shape, voxel_points
 from cat.envs.scene_set import SceneSet, scene_fields
 from cat.eval.manifest import ManifestError, MethodRun
-from cat.learning.config import TrainCfg
+from cat.run.config import TrainCfg
 from cat.terrain import Scene
 from cat.terrain.primitives import box, combine
 
@@ -251,7 +251,7 @@ def test_table3_recipe_differs_only_in_the_exteroceptive_block(tmp_path):
     from cat.experiment.plan import Plan
     from cat.experiment.spec import check_equal_budget, load_experiment
     from cat.learning.hydra_cfg import load_config
-    from cat.learning.run_config import load_run_config
+    from cat.run.config_file import load_run_config
 
     exp = load_experiment("table3")
     plan = Plan(exp, str(tmp_path))

@@ -11,9 +11,10 @@ import yaml
 from cat.envs.config import EnvCfg, NoiseCfg, ObsGroupCfg
 from cat.envs.obs_groups import resolve_groups, upgrade_legacy_observations
 from cat.envs.traversal_env import TraversalEnv
-from cat.learning.config import AlgoCfg, runner_cfg
 from cat.learning.hydra_cfg import load_config
-from cat.learning.runs import load_policy, load_run_config, make_env, train, validate_train_cfg
+from cat.learning.runs import load_run_config, make_env, train, validate_train_cfg
+from cat.run.config import AlgoCfg, runner_cfg
+from cat.run.policy import load_policy
 
 ACTOR = [
     ("gyro", 3, 0.2),

@@ -26,7 +26,7 @@ from cat.checkpoint_io import (
     read_env_snapshot,
     safe_load,
 )
-from cat.learning.config import TrainCfg
+from cat.run.config import TrainCfg
 
 REPO = Path(__file__).resolve().parents[1]
 SHIPPED = sorted((REPO / "checkpoints").glob("*/*.pt"))

@@ -19,7 +19,7 @@ from cat.envs.scene_source import (
     typical_kind_or_none,
 )
 from cat.eval.runner import run_scene_group
-from cat.learning.run_config import load_run_config
+from cat.run.config_file import load_run_config
 from cat.terrain import Scene, typical_variants, warmup_variants
 
 REPO = Path(__file__).resolve().parents[1]

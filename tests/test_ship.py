@@ -8,9 +8,9 @@ import pytest
 import torch
 
 from cat.cli import run
-from cat.learning.config import TrainCfg
 from cat.learning.runs import CheckpointError, validate_train_cfg
 from cat.learning.ship import SCRIPT, ShipCfg, ship
+from cat.run.config import TrainCfg
 
 
 def _run(tmp_path: Path, it: int = 40) -> Path:

@@ -132,8 +132,8 @@ def test_missing_checkpoint_is_clear(tmp_path):
 
 
 def test_torchrun_maps_each_rank_to_its_gpu_and_seed():
-    from cat.learning.config import SimCfg, TrainCfg
     from cat.learning.runs import for_this_rank
+    from cat.run.config import SimCfg, TrainCfg
 
     cfg = TrainCfg(sim=SimCfg(backend="warp", device="cuda"), seed=3)
     assert for_this_rank(cfg, {}) is cfg  # single process: unchanged

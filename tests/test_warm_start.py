@@ -8,10 +8,10 @@ from pathlib import Path
 import torch
 from tensordict import TensorDict
 
-from cat.learning.config import AlgoCfg, policy_model
 from cat.learning.hydra_cfg import load_config
 from cat.learning.runs import make_env, make_runner
 from cat.learning.warm_start import _constant_in_prior, adapt_model, adapt_to_new_inputs, unseen_columns
+from cat.run.config import AlgoCfg, policy_model
 
 
 def _prior(obs: TensorDict):

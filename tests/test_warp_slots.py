@@ -67,7 +67,7 @@ def world_models(scenes, robot_cfg):
 
 @pytest.fixture(scope="module")
 def slots(world_models, robot_cfg):
-    st = SlotTable.build(robot_cfg, world_models.models)
+    st = SlotTable.build(world_models.models, world_models.compose)
     st.model.opt.iterations, st.model.opt.ls_iterations, st.model.opt.tolerance = 100, 50, 1e-7
     return st
 
@@ -118,7 +118,7 @@ def test_obstacle_props_must_agree_across_scenes(world_models, robot_cfg):
     odd = [copy.copy(m) for m in world_models.models[:3]]
     odd[2].geom_priority[obstacle_geom_ids(odd[2])] += 1  # not batched by mujoco_warp
     with pytest.raises(SlotError, match="table model 2: obstacle geom_priority"):
-        SlotTable.build(robot_cfg, odd)
+        SlotTable.build(odd, world_models.compose)
 
 
 def test_parity_with_the_mujoco_per_world_path(world_models, slots, robot_cfg):
@@ -208,11 +208,12 @@ def test_box_and_height_field_slots_step_like_the_scene_model(robot_cfg):
     """A procedural scene (height-field tiles and boxes) next to a typical one (meshes): each slot world steps
     like mujoco_warp on that world's own scene model (float32 summation order aside: ``PLAIN_ATOL``), and the
     typical world, whose box and height-field slots are parked, touches only its wall."""
+    from cat.envs.scene import model_composer
     from cat.envs.scene_models import build_scene_models
 
     scenes = [make_procedural(0.3, 1), typical_variants("hurdle-pass", 1, 0)[0]]
     models = build_scene_models(robot_cfg, scenes)
-    slots = SlotTable.build(robot_cfg, models)
+    slots = SlotTable.build(models, model_composer(robot_cfg))
     assert slots.counts["box"] > 0 and slots.counts["hfield"] > 0 and slots.counts["mesh"] == 3
     dec, kw = robot_cfg.decimation, dict(device="cpu", max_sensors=(COLLISION_SENSOR,), nconmax=96, njmax=384)
     qpos = torch.tensor(home_qpos(robot_cfg), dtype=torch.float64).repeat(3, 1)

@@ -19,8 +19,9 @@ from rsl_rl.runners import OnPolicyRunner
 
 from cat.eval.runner import EvalCfg, SceneGroup, make_eval_env, run_trials
 from cat.eval.trials import scene_trials
-from cat.learning.config import TrainCfg, runner_cfg
-from cat.learning.runs import load_policy, load_run_config
+from cat.learning.runs import load_run_config
+from cat.run.config import TrainCfg, runner_cfg
+from cat.run.policy import load_policy
 from cat.terrain import TYPICAL_KINDS
 
 

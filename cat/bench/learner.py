@@ -1,6 +1,6 @@
 """``scripts/bench.py learner``: wall-clock of one rsl_rl PPO update, without an env, per learner setting.
 
-Builds rsl_rl's PPO exactly as training does (``cat.learning.config.runner_cfg`` → ``PPO.construct_algorithm``:
+Builds rsl_rl's PPO exactly as training does (``cat.run.config.runner_cfg`` → ``PPO.construct_algorithm``:
 the project's actor and critic MLPs with observation normalisation, adaptive learning rate), fills its rollout
 storage with ``--envs`` × ``--steps`` transitions of random observations (actor ``--actor-obs``, critic
 ``--critic-obs`` wide) and rewards through ``act`` / ``process_env_step`` / ``compute_returns`` (not timed),
@@ -26,7 +26,7 @@ import torch
 from rsl_rl.algorithms import PPO
 from tensordict import TensorDict
 
-from cat.learning.config import AlgoCfg, runner_cfg
+from cat.run.config import AlgoCfg, runner_cfg
 
 log = logging.getLogger(__name__)
 

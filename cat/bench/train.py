@@ -13,9 +13,9 @@ import time
 from rsl_rl.runners import OnPolicyRunner
 
 from cat.bench.sim import raw_rate
-from cat.learning.config import runner_cfg
 from cat.learning.hydra_cfg import load_config
 from cat.learning.runs import make_env, set_torch_threads
+from cat.run.config import runner_cfg
 
 
 def ppo_rate(env, cfg, iterations: int) -> float:

@@ -30,9 +30,9 @@ from cat.envs.robot import RobotCfg
 from cat.envs.scene import build_env_model
 from cat.envs.scene_set import SceneSet, scene_fields, scene_folders
 from cat.envs.traversal_env import TraversalEnv
-from cat.learning.config import TrainCfg
 from cat.learning.hydra_cfg import load_config
 from cat.learning.runs import set_torch_threads
+from cat.run.config import TrainCfg
 from cat.terrain import TYPICAL_KINDS, Scene, make_typical
 
 log = logging.getLogger(__name__)

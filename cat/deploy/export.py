@@ -1,7 +1,7 @@
 """A run's policy as one self-contained ONNX file: normaliser baked in, deployment facts in its metadata.
 
 ``python scripts/export.py checkpoint=<model_*.pt | run folder> out=policy.onnx [force=true]``. The network is the
-run's policy (``cat.learning.config.policy_model``: PPO's actor or the distilled student); the file is written
+run's policy (``cat.run.config.policy_model``: PPO's actor or the distilled student); the file is written
 next to ``out`` under a temporary name, checked against torch with onnxruntime, and only then renamed, so a
 failed export leaves nothing behind. See docs/export.md.
 """
@@ -30,12 +30,13 @@ from cat.deploy.metadata import (
     library_versions,
     robot_model_source,
 )
-from cat.deploy.policy import OnnxPolicy, TorchPolicy, load_policy_network
+from cat.deploy.policy import OnnxPolicy, TorchPolicy
 from cat.envs.mdp.actions import soft_joint_limits
 from cat.envs.robot import MenagerieModelError, RobotCfg, load_robot_cfg, robot_spec
 from cat.fields import FieldCfg
-from cat.learning.config import policy_model
-from cat.learning.run_config import load_run_config
+from cat.run.config import policy_model
+from cat.run.config_file import load_run_config
+from cat.run.policy import load_policy_network
 
 log = logging.getLogger("export")
 

@@ -37,7 +37,7 @@ from cat.envs.trial_metrics import TrialResult
 from cat.eval.manifest import ManifestError, MethodRun
 from cat.eval.runner import SceneGroup
 from cat.eval.trials import Trial
-from cat.learning.config import policy_model
+from cat.run.config import policy_model
 
 log = logging.getLogger(__name__)
 

@@ -2,14 +2,13 @@
 ``hold`` (zero actions), all behind one callable: ``policy(obs) -> actions`` and ``policy.reset()``.
 
 A checkpoint comes with the ``config.yaml`` of its run beside it (``cat.learning.runs.load_run_config``); its
-policy network is ``cat.learning.config.policy_model`` of the run (PPO's actor or the distilled student). An ONNX
+policy network is ``cat.run.config.policy_model`` of the run (PPO's actor or the distilled student). An ONNX
 file carries the same facts in its metadata (``cat.deploy.metadata``), and is refused when they differ from the
 layout the runtime builds. Either way the demo builds the observation the policy was trained on.
 """
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -17,11 +16,12 @@ import numpy as np
 import torch
 from tensordict import TensorDict
 
-from cat.checkpoint_io import CheckpointError, read_checkpoint, resolve_checkpoint
+from cat.checkpoint_io import resolve_checkpoint
 from cat.deploy.metadata import PolicyFileError, PolicyMetadata, layout_mismatches, read_metadata
 from cat.envs.config import EnvCfg, FieldObsCfg, ObsGroupCfg
-from cat.learning.config import TrainCfg, policy_model
-from cat.learning.run_config import load_run_config
+from cat.run.config import TrainCfg, policy_model
+from cat.run.config_file import load_run_config
+from cat.run.policy import load_policy_network
 
 HOLD = "hold"
 
@@ -159,27 +159,6 @@ def check_session(session, meta: PolicyMetadata, source: str) -> None:
             f"{source}: graph maps obs {inputs['obs'][-1]} -> actions {outputs['actions'][-1]}, its metadata says "
             f"{meta.obs_dim} -> {meta.num_actions}"
         )
-
-
-def load_policy_network(checkpoint: str | os.PathLike, run: TrainCfg, obs: TensorDict, num_actions: int, state=None):
-    """The run's policy network (deterministic, eval mode) for observations shaped like ``obs``, loaded strictly
-    from ``checkpoint`` (or its already read dict ``state``)."""
-    pm = policy_model(run.algo)
-    state = state if state is not None else read_checkpoint(checkpoint)
-    if pm.state_key not in state:
-        raise CheckpointError(
-            f"{checkpoint}: no {pm.state_key} (its run is algo.name={run.algo.name}; keys: {', '.join(state)})"
-        )
-    model = pm.build(obs, num_actions)
-    try:
-        model.load_state_dict(state[pm.state_key], strict=True)
-    except RuntimeError as err:
-        first = str(err).splitlines()[1].strip() if len(str(err).splitlines()) > 1 else str(err)
-        raise CheckpointError(
-            f"checkpoint {checkpoint} does not match the observation layout / network: {first}"
-        ) from None
-    model.eval()
-    return model
 
 
 def load_policy(spec: PolicySpec, obs: TensorDict, num_actions: int, layout: PolicyMetadata | None = None):

@@ -19,9 +19,9 @@ import mujoco
 import numpy as np
 import yaml
 
-OBSTACLE_BIT = 1
+from cat.terrain.mujoco_export import OBSTACLE_BIT, OBSTACLE_BODY  # noqa: F401  (the one definition, re-exported)
+
 FLOOR_BIT = 2
-OBSTACLE_BODY = "obstacles"
 QUERY_SITE_PREFIX = "query_"
 ROBOT_CFG_PATH = Path(__file__).resolve().parents[2] / "robots" / "g1" / "g1.yaml"
 

@@ -200,3 +200,12 @@ def strip_visual_meshes(spec: mujoco.MjSpec) -> None:
     for mesh in list(spec.meshes):
         if mesh.name not in used:
             spec.delete(mesh)
+
+
+def model_composer(robot: RobotCfg) -> Callable[[Callable[[mujoco.MjSpec], None]], mujoco.MjModel]:
+    """``compose(add_obstacles)``: the env model of ``robot`` (visual meshes stripped, the robot read once) with
+    the obstacles ``add_obstacles`` puts on the spec. Handed to the physics layer (``SlotTable.build``), which
+    composes its slot model this way without importing the env."""
+    base = robot_spec(robot)
+    strip_visual_meshes(base)
+    return lambda add_obstacles: env_spec(robot, add_obstacles, base=base).compile()

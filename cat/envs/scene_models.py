@@ -27,7 +27,7 @@ from __future__ import annotations
 import copy
 import logging
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import mujoco
 import numpy as np
@@ -37,7 +37,7 @@ import trimesh
 from cat.envs.config import DomainRandCfg
 from cat.envs.mdp.events import scaled_gains
 from cat.envs.robot import RobotCfg, robot_spec
-from cat.envs.scene import env_spec, strip_visual_meshes
+from cat.envs.scene import env_spec, model_composer, strip_visual_meshes
 from cat.envs.sim.layout import PAD_BODY, SceneModelError, check_compatible, data_layout
 from cat.envs.sim.mujoco_backend import set_model_gains, set_model_mass_scale
 from cat.terrain import Scene
@@ -195,6 +195,11 @@ class WorldModels:
             wm.nbytes / 2**20,
         )
         return wm
+
+    def compose(self, add_obstacles: Callable[[mujoco.MjSpec], None]) -> mujoco.MjModel:
+        """The env model of this table's robot with the obstacles ``add_obstacles`` adds (``model_composer``):
+        how the physics layer builds a slot model over the table (``cat.envs.sim.warp_slots``)."""
+        return model_composer(self.robot)(add_obstacles)
 
     def ids(self, scene_ids: torch.Tensor, members: torch.Tensor) -> torch.Tensor:
         """Model ids of (scene, pool member) pairs."""

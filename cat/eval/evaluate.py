@@ -10,7 +10,6 @@ names and renamed into place, so an error leaves no half-written output.
 
 from __future__ import annotations
 
-import contextlib
 import csv
 import io
 import logging
@@ -28,7 +27,7 @@ from cat.eval.manifest import Manifest, ManifestError, MethodRun, load_manifest
 from cat.eval.runner import EvalCfg, HoldPolicy, SceneGroup, make_eval_env, run_trials
 from cat.eval.table import CSV_COLUMNS, render_latex, render_markdown
 from cat.eval.trials import Trial, scene_trials
-from cat.learning.runs import load_policy
+from cat.run.policy import load_policy
 from cat.terrain import TYPICAL_KINDS
 
 log = logging.getLogger(__name__)
@@ -57,12 +56,12 @@ def scene_groups(manifest: Manifest) -> dict[str, list[SceneGroup]]:
     out = {}
     if manifest.table1 is not None:
         t1 = manifest.table1
-        out["table1"] = [SceneGroup.typical(k, t1["variants"], t1["scene_seed"]) for k in TYPICAL_KINDS]
+        out["table1"] = [SceneGroup.typical(k, t1["variants"], t1["scene_seed"], t1["shapes"]) for k in TYPICAL_KINDS]
     if manifest.table2:
         out["table2"] = [SceneGroup.from_dir(name, folder) for name, folder in manifest.table2.items()]
     if manifest.table3 is not None:
         t3 = manifest.table3
-        out["table3"] = [SceneGroup.typical(k, t3["variants"], t3["scene_seed"]) for k in t3["kinds"]]
+        out["table3"] = [SceneGroup.typical(k, t3["variants"], t3["scene_seed"], t3["shapes"]) for k in t3["kinds"]]
     return out
 
 
@@ -72,7 +71,7 @@ def check_policy(run: MethodRun, opts: EvalCfg, sim: str, device: str) -> None:
         return
     env = make_eval_env(run.config.task, None, 1, opts, sim, device, run.config.sim.obstacles)
     try:
-        quiet_load_policy(run.checkpoint, env, run)
+        load_policy(run.checkpoint, env, run.config)
     except UnsafeCheckpointError as err:
         raise ManifestError(f"method {run.method!r}: {err}") from None
     except CheckpointError as err:
@@ -80,12 +79,6 @@ def check_policy(run: MethodRun, opts: EvalCfg, sim: str, device: str) -> None:
             f"method {run.method!r}: checkpoint {run.checkpoint} does not fit the observation layout of its "
             f"config.yaml ({err})"
         ) from err
-
-
-def quiet_load_policy(checkpoint: str, env, run: MethodRun):
-    """``load_policy`` without rsl_rl's printout of the networks (stdout carries the tables)."""
-    with contextlib.redirect_stdout(io.StringIO()):
-        return load_policy(checkpoint, env, run.config)
 
 
 def trial_row(run: MethodRun, table: str, group: SceneGroup, t: Trial, r: TrialResult) -> dict[str, str]:
@@ -159,7 +152,7 @@ def evaluate(cfg: EvalTableCfg, live=None) -> tuple[list[dict[str, str]], dict[s
                     if run.checkpoint is None:
                         policy = HoldPolicy(env.num_actions)
                     else:
-                        policy = quiet_load_policy(run.checkpoint, env, run)
+                        policy = load_policy(run.checkpoint, env, run.config)
                     bar.set_postfix_str(f"{run.method}/{run.seed} {table} {group.name}")
                     results = run_trials(env, policy, ts, seed=opts.seed, progress=bar)
                     rows += [trial_row(run, table, group, t, r) for t, r in zip(ts, results, strict=True)]
@@ -179,6 +172,12 @@ def evaluate(cfg: EvalTableCfg, live=None) -> tuple[list[dict[str, str]], dict[s
         text = note
         if table == "table1" and per_type:
             text += f" {', '.join(per_type)}: each column played by that type's own checkpoint(s); – = none."
+        shapes = (manifest.table1 if table == "table1" else manifest.table3 if table == "table3" else {}) or {}
+        if shapes.get("shapes", "paper") != "paper":
+            text += (
+                f" Scenes: the typical layouts built from {shapes['shapes']} obstacle shapes "
+                f"(scene seeds {shapes['scene_seed']}..{shapes['scene_seed'] + shapes['variants'] - 1})."
+            )
         files[f"{table}.md"] = render_markdown(rows, table, shown, names, text)
         files[f"{table}.tex"] = render_latex(rows, table, shown, names, text)
     return rows, files

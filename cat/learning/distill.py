@@ -26,8 +26,8 @@ from tensordict import TensorDict
 from cat.checkpoint_io import CheckpointError, read_checkpoint, resolve_checkpoint
 from cat.envs.obs_groups import groups_layout
 from cat.envs.scene_set import scene_folders
-from cat.learning.config import TrainCfg, policy_model
-from cat.learning.run_config import load_run_config
+from cat.run.config import TrainCfg, policy_model
+from cat.run.config_file import load_run_config
 from cat.terrain.data_groups import select
 
 log = logging.getLogger(__name__)
@@ -277,7 +277,7 @@ def load_student_init(alg: Distillation, ckpt: dict, path: str) -> None:
 
 def distill_runner_cfg(cfg: TrainCfg, group_names: list[str]) -> dict:
     """rsl_rl ``DistillationRunner`` config of a distillation run (student, multi-teacher, algorithm)."""
-    from cat.learning.config import student_model_cfg
+    from cat.run.config import student_model_cfg
 
     algo, d = cfg.algo, cfg.algo.distill
     return {

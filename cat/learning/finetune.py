@@ -17,7 +17,7 @@ from pathlib import Path
 import torch
 from rsl_rl.runners import OnPolicyRunner
 
-from cat.learning.config import TrainCfg
+from cat.run.config import TrainCfg
 
 log = logging.getLogger(__name__)
 

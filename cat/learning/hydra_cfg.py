@@ -14,7 +14,7 @@ from hydra.core.global_hydra import GlobalHydra
 from omegaconf import OmegaConf
 
 from cat.cli import CliError, unknown_key_message, valid_keys
-from cat.learning.config import TrainCfg
+from cat.run.config import TrainCfg
 
 CONFIG_DIR = Path(__file__).resolve().parents[2] / "configs"
 

@@ -32,7 +32,7 @@ import torch
 from cat.checkpoint_io import CheckpointError, read_checkpoint
 from cat.envs.config import EnvCfg, ObsGroupCfg
 from cat.envs.obs_groups import group_layout, groups_layout, resolve_groups
-from cat.learning.run_config import load_run_config
+from cat.run.config_file import load_run_config
 
 log = logging.getLogger(__name__)
 

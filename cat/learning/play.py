@@ -18,7 +18,8 @@ from cat.envs.trial_metrics import Summary, TrialResult, summarize
 from cat.eval.contacts import FirstContacts
 from cat.eval.runner import EvalCfg, make_eval_env, run_scene_group, run_trials
 from cat.eval.trials import Trial, first_trials, flat_trials, scene_trials
-from cat.learning.runs import load_policy, load_run_config, resolve_checkpoint
+from cat.learning.runs import load_run_config, resolve_checkpoint
+from cat.run.policy import load_policy
 from cat.terrain.scene import Scene
 
 log = logging.getLogger(__name__)

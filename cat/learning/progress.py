@@ -7,24 +7,19 @@ iteration count are final, so a budget stop leaves a complete iteration to save.
 
 from __future__ import annotations
 
-import contextlib
-import io
 import logging
 import statistics
 import time
 
 from rsl_rl.runners import OnPolicyRunner
 
+from cat.run.policy import quiet_constructor
+
 log = logging.getLogger("cat.train")
 
 
 class BudgetReached(Exception):
     """Raised after the iteration that passes ``max_minutes``."""
-
-
-def quiet_constructor(verbose: bool):
-    """Context that swallows rsl_rl's model printout unless ``verbose``."""
-    return contextlib.nullcontext() if verbose else contextlib.redirect_stdout(io.StringIO())
 
 
 def install_iteration_hook(runner: OnPolicyRunner, total: int, minutes: float = 0.0, verbose: bool = False) -> None:

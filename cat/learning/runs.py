@@ -26,7 +26,6 @@ from cat.envs.obs_groups import resolve_groups
 from cat.envs.scene_source import check_scene_task, scene_set_for
 from cat.envs.sim import check_backend
 from cat.envs.traversal_env import TraversalEnv
-from cat.learning.config import ALGOS, TrainCfg, check_obs_groups, policy_model, runner_cfg, student_model_cfg
 from cat.learning.distill import (
     check_student_init,
     check_teachers,
@@ -42,10 +41,12 @@ from cat.learning.finetune import (
 )
 from cat.learning.layout_init import init_from_prior
 from cat.learning.precision import check_mixed_precision
-from cat.learning.progress import BudgetReached, install_iteration_hook, quiet_constructor
+from cat.learning.progress import BudgetReached, install_iteration_hook
 from cat.learning.rerun_writer import prune_metrics
-from cat.learning.run_config import load_run_config, resume_config, save_config  # noqa: F401  (re-exported)
 from cat.learning.warm_start import adapt_to_new_inputs
+from cat.run.config import ALGOS, TrainCfg, check_obs_groups, runner_cfg, student_model_cfg
+from cat.run.config_file import load_run_config, resume_config, save_config  # noqa: F401  (re-exported)
+from cat.run.policy import quiet_constructor
 
 log = logging.getLogger(__name__)
 
@@ -338,25 +339,3 @@ def _train_in(cfg: TrainCfg, env: TraversalEnv, run_dir: Path) -> Path:
             run_dir / f"model_{it}.pt",
         )
     return run_dir
-
-
-def load_policy(checkpoint: str | os.PathLike, env: TraversalEnv, cfg: TrainCfg):
-    """Deterministic inference policy of a checkpoint (PPO actor or distilled student) for ``env``: called on the
-    env's observation ``TensorDict``; ``reset()`` clears a recurrent student's memory."""
-    model = policy_model(cfg.algo)
-    missing = [g for g in model.obs_groups if g not in env.obs_groups]
-    if missing:
-        raise CheckpointError(
-            f"checkpoint {checkpoint} reads observation group {missing[0]!r} that this env does not build "
-            f"(groups: {', '.join(env.obs_groups)})"
-        )
-    state = read_checkpoint(checkpoint)
-    if model.state_key not in state:
-        raise CheckpointError(f"checkpoint {checkpoint} has no {model.state_key} (its config says {cfg.algo.name})")
-    with quiet_constructor(False):
-        policy = model.build(env.get_observations(), env.num_actions).to(env.device)
-    try:
-        policy.load_state_dict(state[model.state_key], strict=True)
-    except (RuntimeError, KeyError) as err:
-        raise CheckpointError(f"checkpoint {checkpoint} does not match this env/policy: {err}") from err
-    return policy.eval()

@@ -1,7 +1,8 @@
 """Scenes (paper §III-B): typical types, procedural obstacles, indoor crops, mesh I/O, MuJoCo export.
 
 Knows nothing of ``cat.envs``: the MuJoCo export takes an ``MjSpec`` and shares only the collision
-constants ``OBSTACLE_BODY``/``OBSTACLE_BIT`` (checked equal to ``cat.envs.robot``'s by a test).
+constants ``OBSTACLE_BODY``/``OBSTACLE_BIT``, defined in ``mujoco_export`` (the env and the physics layer import
+them from there).
 """
 
 from cat.terrain.front3d import Front3DError, load_front3d

@@ -59,5 +59,5 @@ def make_backend(
     from cat.envs.sim.warp_slots import SlotTable
 
     dev = "cpu" if device.startswith("cpu") else device
-    slots = SlotTable.build(world_models.robot, world_models.models) if world_models is not None else None
+    slots = SlotTable.build(world_models.models, world_models.compose) if world_models is not None else None
     return WarpBackend(model, num_envs, decimation, device=dev, max_sensors=max_sensors, slots=slots)

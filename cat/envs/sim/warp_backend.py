@@ -340,7 +340,8 @@ class WarpBackend(PhysicsBackend):
         ):
             raise NotImplementedError(
                 "WarpBackend compiles its slot model from the model table when it is built: pass "
-                "slots=SlotTable.build(robot, models) (cat.envs.sim.make_backend(..., world_models=...) does)"
+                "slots=SlotTable.build(models, world_models.compose) "
+                "(cat.envs.sim.make_backend(..., world_models=...) does)"
             )
 
     def assign_models(self, env_ids, model_ids) -> None:

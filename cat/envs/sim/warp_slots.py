@@ -24,19 +24,20 @@ from __future__ import annotations
 
 import hashlib
 import logging
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import mujoco
 import numpy as np
 import torch
 
-from cat.envs.robot import OBSTACLE_BODY, RobotCfg, robot_spec
-from cat.envs.scene import env_spec, strip_visual_meshes
 from cat.envs.sim.layout import PAD_BODY, SceneModelError, check_compatible
-from cat.terrain.mujoco_export import obstacle_geom_ids
+from cat.terrain.mujoco_export import OBSTACLE_BODY, obstacle_geom_ids
 
 log = logging.getLogger(__name__)
+
+# compose(add_obstacles) -> the env model with the obstacles the hook adds (``cat.envs.scene.model_composer``)
+Composer = Callable[[Callable[[mujoco.MjSpec], None]], mujoco.MjModel]
 
 PARK_Z = -50.0  # m: unused box / height-field slots sit this far below the floor
 PARK_BOX = 1e-3  # m: half size of a parked box slot
@@ -74,8 +75,10 @@ class SlotTable:
     counts: dict[str, int]
 
     @classmethod
-    def build(cls, robot: RobotCfg, table: Sequence[mujoco.MjModel]) -> SlotTable:
-        """Slot model (robot + slots) of ``table`` (per-world scene models, ``cat.envs.scene_models``)."""
+    def build(cls, table: Sequence[mujoco.MjModel], compose: Composer) -> SlotTable:
+        """Slot model (robot + slots) of ``table`` (per-world scene models, ``cat.envs.scene_models``);
+        ``compose(add_obstacles)`` compiles the env model with the obstacles a hook adds (``WorldModels.compose``:
+        the env's composition is handed in, not imported)."""
         table = list(table)
         uniq: dict[str, int] = {}
         model_uniq = [uniq.setdefault(_geometry_key(m), len(uniq)) for m in table]
@@ -108,9 +111,7 @@ class SlotTable:
             for name in assets.mesh_names:
                 pad.add_geom(type=_MESH, meshname=name, contype=0, conaffinity=_NO_BIT, group=5, pos=[0.0, 0.0, PARK_Z])
 
-        base = robot_spec(robot)
-        strip_visual_meshes(base)
-        model = env_spec(robot, add_slots, base=base).compile()
+        model = compose(add_slots)
         check_compatible([table[0], model], ["table model 0", "the slot model"])
         _check_bodies(table[0], model)
         assets.check_same(catalogue_model, model)

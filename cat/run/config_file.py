@@ -12,7 +12,7 @@ from omegaconf import OmegaConf
 
 from cat.checkpoint_io import CheckpointError, resolve_checkpoint
 from cat.envs.obs_groups import upgrade_legacy_observations
-from cat.learning.config import TrainCfg
+from cat.run.config import TrainCfg
 
 
 def save_config(cfg: TrainCfg, run_dir: Path) -> None:

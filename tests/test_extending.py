@@ -17,9 +17,9 @@ from cat.deploy.metadata import read_metadata
 from cat.deploy.policy import TorchPolicy
 from cat.envs.mdp.registry import OBS_TERMS, REWARD_TERMS, register_observation, register_reward
 from cat.envs.obs_groups import group_layout
-from cat.learning.config import policy_model
 from cat.learning.hydra_cfg import load_config
 from cat.learning.runs import make_env, save_config
+from cat.run.config import policy_model
 
 REPO = Path(__file__).resolve().parents[1]
 DOC = REPO / "docs" / "extending.md"
@@ -75,6 +75,7 @@ def test_env_reads_and_scores_the_new_terms(example):
     noise = obs["actor"][:, col] - obs["critic"][:, col]  # the declared noise at task.noise.extra's scale
     assert torch.all(noise != 0) and torch.all(noise.abs() <= 0.001)
     assert torch.all(env.episode_sums["pelvis_height"] < 0)  # the weight is negative, the error positive
+    assert env.reward_terms["pelvis_height"] == (-2.0, {"target": 0.74})  # weight and constant from the config
     perm, sign = env.mirror_map.obs["actor"]  # symmetry reads the declared mirror map
     assert len(perm) == obs["actor"].shape[-1] and perm[col] == col and sign[col] == 1.0
     with pytest.raises(ValueError, match="unknown reward term 'nope'"):

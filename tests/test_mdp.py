@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 
 import mujoco
@@ -79,9 +80,10 @@ def test_heading_is_free_near_obstacles(flat_env):
     env.command_vel[:] = torch.tensor([0.0, 0.8])  # command along +y
     yaw = env.state.yaw.clone()
     env.state.yaw[:] = 0.0  # facing +x: 90 degrees off
-    assert torch.allclose(rew.track_heading(env), torch.zeros(4), atol=1e-5)
+    heading = functools.partial(rew.track_heading, env, **env.reward_terms["track_heading"][1])
+    assert torch.allclose(heading(), torch.zeros(4), atol=1e-5)
     env.field.sdf[:2, 5] = 0.1  # a link of envs 0, 1 close to an obstacle: side-stepping allowed
-    assert rew.track_heading(env).tolist()[:2] == [1.0, 1.0]
+    assert heading().tolist()[:2] == [1.0, 1.0]
     env.state.yaw[:] = yaw
     env.field.sdf[:] = env.cfg.field_obs.sdf_clip
 
@@ -102,20 +104,18 @@ def test_contact_with_an_obstacle_costs_reward():
 def test_foot_clearance_min_only_lets_feet_clear_a_hurdle(flat_env):
     env = flat_env
     env.step(torch.zeros(4, env.num_actions))
-    params = env.cfg.rewards.params
-    swing = ~rew._stance(env)
+    params = dict(env.reward_terms["feet_clearance"][1])
+    assert params["foot_clearance_min_only"] is False
+    swing = ~rew._stance(env, params["standing_speed"])
     if not swing.any():
         pytest.skip("no swing foot in this state")
     env.state.foot_vel[..., :2] = 1.0
-    env.state.foot_pos[..., 2] = params.foot_clearance + 0.1  # 17 cm: over an 8-15 cm bar
-    assert (rew.feet_clearance(env) > 0).any()  # the release's two-sided term punishes hurdling
-    params.foot_clearance_min_only = True
-    try:
-        assert torch.equal(rew.feet_clearance(env), torch.zeros(4))
-        env.state.foot_pos[..., 2] = params.foot_clearance - 0.05  # too low is still penalised
-        assert (rew.feet_clearance(env) > 0).any()
-    finally:
-        params.foot_clearance_min_only = False
+    env.state.foot_pos[..., 2] = params["foot_clearance"] + 0.1  # 17 cm: over an 8-15 cm bar
+    assert (rew.feet_clearance(env, **params) > 0).any()  # the release's two-sided term punishes hurdling
+    params["foot_clearance_min_only"] = True
+    assert torch.equal(rew.feet_clearance(env, **params), torch.zeros(4))
+    env.state.foot_pos[..., 2] = params["foot_clearance"] - 0.05  # too low is still penalised
+    assert (rew.feet_clearance(env, **params) > 0).any()
 
 
 def test_foot_sole_barrier_sees_a_toe_the_sole_centre_does_not():
@@ -156,7 +156,7 @@ def test_foot_sole_barrier_sees_a_toe_the_sole_centre_does_not():
             x, _, z = centre + end * axis
             dist = math.hypot(x - xc, z - zc) - r
             expect += math.log1p(math.exp((p.sole_margin - dist) / p.barrier_width))
-    got = float(rew.foot_sole_barrier(env)[0])
+    got = float(rew.foot_sole_barrier(env, p.sole_margin, p.barrier_width)[0])
     assert got == pytest.approx(expect, rel=0.15), (got, expect)
     centre_only = F.softplus((p.barrier_margin - env.field.sdf[0, env._foot_link]) / p.barrier_width).sum()
     assert got > 2.0 and got > 3 * float(centre_only)

@@ -50,7 +50,7 @@ def test_methods_compose_and_are_recorded():
 
 
 def _reward_terms(env) -> dict[str, torch.Tensor]:
-    return {name: getattr(rew, name)(env) for name in env.reward_names}
+    return {name: getattr(rew, name)(env, **params) for name, (_, params) in env.reward_terms.items()}
 
 
 @pytest.mark.parametrize("method", METHODS)

@@ -191,10 +191,10 @@ def test_terrain_aware_foot_clearance_targets_the_obstacle_top(scene_env):
     from cat.envs.mdp import rewards as rew
 
     env = scene_env
-    params = env.cfg.rewards.params
+    p = dict(env.reward_terms["feet_clearance"][1])
     env.command_vel[:] = torch.tensor([0.5, 0.0])  # walking: the gait clock decides swing
     env.phase[:] = 0.25  # left foot in stance, right foot swinging
-    swing = ~rew._stance(env)
+    swing = ~rew._stance(env, p["standing_speed"])
     assert swing[:, 1].all() and not swing[:, 0].any()
     env.state.foot_vel[:] = torch.tensor([1.0, 0.0, 0.0])
     z = 0.15
@@ -204,19 +204,14 @@ def test_terrain_aware_foot_clearance_targets_the_obstacle_top(scene_env):
     # 0.22 m before the box's near face at x = 0.62; env 0, 2 in the scene (box at y > 0), 1, 3 in its mirror image
     lane = torch.tensor([0.5, -0.5, 0.5, -0.5])
     env.state.foot_pos[..., :2] = (torch.stack((torch.full((4,), 0.4), lane), dim=-1) + offset)[:, None]
-    old = (params.foot_clearance_lookahead, params.foot_clearance_min_only, params.foot_clearance_step_max)
-    try:
-        params.foot_clearance_min_only = True
-        params.foot_clearance_lookahead = 0.0
-        assert torch.equal(rew.feet_clearance(env), torch.zeros(4))  # 15 cm is above the flat 7 cm target
-        params.foot_clearance_lookahead = 0.3
-        expected = (HURDLE[1][2] + params.foot_clearance - z) ** 2  # speed 1, one swing foot
-        got = rew.feet_clearance(env)
-        torch.testing.assert_close(got, torch.full((4,), expected), atol=1e-5, rtol=0)
-        params.foot_clearance_step_max = 0.3  # a 0.32 m box counts as a wall: no target over it
-        assert torch.equal(rew.feet_clearance(env), torch.zeros(4))
-        params.foot_clearance_step_max = 0.4
-        env.state.foot_pos[..., 1] -= 2 * lane[:, None]  # the other side of the course: flat floor
-        assert torch.equal(rew.feet_clearance(env), torch.zeros(4))
-    finally:
-        params.foot_clearance_lookahead, params.foot_clearance_min_only, params.foot_clearance_step_max = old
+    p.update(foot_clearance_min_only=True, foot_clearance_lookahead=0.0)
+    assert torch.equal(rew.feet_clearance(env, **p), torch.zeros(4))  # 15 cm is above the flat 7 cm target
+    p["foot_clearance_lookahead"] = 0.3
+    expected = (HURDLE[1][2] + p["foot_clearance"] - z) ** 2  # speed 1, one swing foot
+    got = rew.feet_clearance(env, **p)
+    torch.testing.assert_close(got, torch.full((4,), expected), atol=1e-5, rtol=0)
+    p["foot_clearance_step_max"] = 0.3  # a 0.32 m box counts as a wall: no target over it
+    assert torch.equal(rew.feet_clearance(env, **p), torch.zeros(4))
+    p["foot_clearance_step_max"] = 0.4
+    env.state.foot_pos[..., 1] -= 2 * lane[:, None]  # the other side of the course: flat floor
+    assert torch.equal(rew.feet_clearance(env, **p), torch.zeros(4))

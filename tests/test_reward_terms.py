@@ -1,18 +1,17 @@
 """Reward terms as declared objects (``cat/envs/mdp/rewards.py``, ``@reward_term``): every weight of ``RewardCfg``
-is a declared term, every constant of ``RewardCfg.params`` is read by a term that declares it, and each term reads
-no constant it does not declare; ``reward_terms`` gives name -> (weight, params)."""
+is a declared term, every constant of ``RewardCfg.params`` is a keyword parameter of some term, and each term
+reads its constants from its arguments only; ``reward_terms`` gives name -> (weight, params)."""
 
 from __future__ import annotations
 
 import dataclasses
-from types import SimpleNamespace
 
 import pytest
 import torch
 
 from cat.envs.config import RewardCfg, RewardParamsCfg
 from cat.envs.mdp import rewards as reward_module
-from cat.envs.mdp.registry import REWARD_TERMS, active_rewards, reward_terms
+from cat.envs.mdp.registry import REWARD_TERMS, active_rewards, reward_params, reward_terms
 from cat.learning.hydra_cfg import load_config
 from cat.learning.runs import make_env
 
@@ -39,9 +38,11 @@ def test_reward_terms_pairs_each_weight_with_its_constants():
         active_rewards(dataclasses.replace(cfg, extra={"alive": 1.0}))
 
 
-def test_each_term_reads_only_its_declared_constants():
+def test_each_term_reads_its_constants_from_its_arguments():
     """Each built-in term on a hurdle env (the foot-clearance look-ahead and the field heading gate on) gives the
-    same value when ``env.cfg.rewards`` holds only the constants it declares (an undeclared read would fail)."""
+    value the env summed, called with only the constants ``reward_terms`` resolved, while ``env.cfg.rewards`` is
+    gone (a term reading the reward config itself would fail); a changed constant changes the value (the
+    arguments are what the term reads)."""
     overrides = ["task=hurdle_crouch", "sim=mujoco", "num_envs=2", "task.scene_variants=2"]
     env = make_env(load_config([*overrides, "task.rewards.params.foot_clearance_lookahead=0.3"]))
     gen = torch.Generator().manual_seed(0)
@@ -49,13 +50,39 @@ def test_each_term_reads_only_its_declared_constants():
         env.step(0.3 * torch.randn(2, env.num_actions, generator=gen))
     full = env.cfg.rewards
     assert full.params.heading_gate == "field" and full.params.foot_clearance_lookahead > 0
-    for name in sorted(BUILTIN):
-        params = REWARD_TERMS[name].params
-        inner = {p: getattr(full.params, p) for p in params if hasattr(full.params, p)}
-        outer = {p: getattr(full, p) for p in params if not hasattr(full.params, p)}
-        expected = REWARD_TERMS[name].fn(env)
-        env.cfg.rewards = SimpleNamespace(params=SimpleNamespace(**inner), **outer)
-        try:
-            torch.testing.assert_close(REWARD_TERMS[name].fn(env), expected, rtol=0, atol=0, msg=name)
-        finally:
-            env.cfg.rewards = full
+    expected = {name: REWARD_TERMS[name].fn(env, **reward_params(full, name)) for name in sorted(BUILTIN)}
+    env.cfg.rewards = None
+    try:
+        for name in sorted(BUILTIN):
+            params = reward_params(full, name)
+            assert set(params) == set(REWARD_TERMS[name].params)
+            torch.testing.assert_close(REWARD_TERMS[name].fn(env, **params), expected[name], rtol=0, atol=0, msg=name)
+    finally:
+        env.cfg.rewards = full
+    sigma = reward_params(full, "track_velocity")["velocity_sigma"]
+    assert not torch.equal(reward_module.track_velocity(env, 4 * sigma), expected["track_velocity"])
+
+
+def test_a_registered_term_takes_its_constants_from_extra():
+    """A term registered from outside: its constants come from ``extra.<name>.params``, else its signature's
+    defaults; an unknown constant, one with no value, or a malformed entry is one clear error."""
+    from cat.envs.mdp import terms
+
+    def lean(env, target: float, scale: float = 2.0):
+        return torch.full((1,), target * scale)
+
+    terms.register_reward("lean", lean)
+    try:
+        assert REWARD_TERMS["lean"].params == ("target", "scale")
+        cfg = dataclasses.replace(RewardCfg(), extra={"lean": {"weight": -1.0, "params": {"target": 0.7}}})
+        assert reward_terms(cfg)["lean"] == (-1.0, {"target": 0.7, "scale": 2.0})
+        with pytest.raises(ValueError, match=r"needs task.rewards.extra.lean.params.target"):
+            reward_terms(dataclasses.replace(cfg, extra={"lean": -1.0}))
+        with pytest.raises(ValueError, match=r"extra.lean.params: tilt not taken by the term \(takes: target, scale\)"):
+            reward_terms(dataclasses.replace(cfg, extra={"lean": {"weight": 1.0, "params": {"target": 1, "tilt": 2}}}))
+        with pytest.raises(ValueError, match="must be a weight or"):
+            reward_terms(dataclasses.replace(cfg, extra={"lean": "heavy"}))
+        with pytest.raises(ValueError, match="constants must be named parameters"):
+            terms.register_reward("lean_args", lambda env, *rest: rest)
+    finally:
+        terms.REWARD_TERMS.pop("lean", None)

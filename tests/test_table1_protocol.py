@@ -87,8 +87,9 @@ def test_each_method_builds_the_documented_groups_and_rewards(tmp_path, method):
     obs_terms, method_rewards, command = DOCUMENTED[method]
     assert env.observation_groups.groups["actor"] == SHARED + obs_terms
     assert env.observation_groups.groups["critic"] == SHARED + obs_terms + PRIVILEGED
-    assert {k: v for k, v in env.reward_weights.items() if k in METHOD_TERMS} == method_rewards
-    common = {k: v for k, v in env.reward_weights.items() if k not in METHOD_TERMS}
+    weights = {k: w for k, (w, _) in env.reward_terms.items()}
+    assert {k: v for k, v in weights.items() if k in METHOD_TERMS} == method_rewards
+    common = {k: v for k, v in weights.items() if k not in METHOD_TERMS}
     ours = {k: v for k, v in load_config(["task=typical"]).task.rewards.__dict__.items() if isinstance(v, float)}
     assert common == {k: v for k, v in ours.items() if v != 0.0 and k not in METHOD_TERMS}
     assert env.cfg.command.source == command

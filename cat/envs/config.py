@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 from cat.envs.curriculum import CurriculumCfg
 from cat.envs.episodes import EpisodeCfg
@@ -209,8 +210,9 @@ class RewardCfg:
     collision: float = -5.0  # per control step with robot-obstacle contact at any substep
     termination: float = -20.0
     params: RewardParamsCfg = field(default_factory=RewardParamsCfg)
-    # weights of reward terms registered outside the package (cat.envs.mdp.registry.register_reward); docs/extending.md
-    extra: dict[str, float] = field(default_factory=dict)
+    # reward terms registered outside the package (cat.envs.mdp.registry.register_reward): <name>: <weight>, or
+    # <name>: {weight: <w>, params: {<constant>: <value>}} (constants default to the term's signature); extending.md
+    extra: dict[str, Any] = field(default_factory=dict)
 
 
 @dataclass

@@ -30,7 +30,7 @@ from cat.envs.mdp.actions import apply_actions, soft_joint_limits
 from cat.envs.mdp.commands import command_source, velocity_command
 from cat.envs.mdp.context import SimState
 from cat.envs.mdp.field_obs import field_obs
-from cat.envs.mdp.registry import active_rewards, reward_fn
+from cat.envs.mdp.registry import reward_fn, reward_terms
 from cat.envs.obs_groups import ObservationGroups, lookup_term
 from cat.envs.odometry import OdometryDrift
 from cat.envs.perception import ScenePerception
@@ -156,8 +156,8 @@ class TraversalEnv(VecEnv):
         if noise.enabled and self.cfg.field_obs.enabled and self.observation_groups.uses("field_block_odometry"):
             self.odometry = OdometryDrift(n, noise.odometry_xy, noise.odometry_yaw, dev)
             self.field_obs_odom_buf = torch.zeros(n, k, 7, **f32)
-        self.reward_weights = active_rewards(self.cfg.rewards)  # name -> weight; registered terms last
-        self.reward_names = list(self.reward_weights)
+        self.reward_terms = reward_terms(self.cfg.rewards)  # name -> (weight, params); registered terms last
+        self.reward_names = list(self.reward_terms)
         self.obs_groups = self.observation_groups.groups  # group name -> terms, in order (symmetry, layouts)
         self._mirror_map = None
         for t in self.cfg.terminations.terms:
@@ -329,8 +329,8 @@ class TraversalEnv(VecEnv):
 
         # rewards
         reward = torch.zeros(self.num_envs, device=self.device)
-        for name, weight in self.reward_weights.items():
-            value = reward_fn(name)(self) * weight
+        for name, (weight, params) in self.reward_terms.items():
+            value = reward_fn(name)(self, **params) * weight
             value = torch.nan_to_num(value, nan=0.0, posinf=0.0, neginf=0.0)
             self.episode_sums[name] += value
             reward += value

@@ -10,8 +10,10 @@ the deploy runtime (``cat.deploy.runtime``) read ``obs_term`` / ``OBS_TERMS`` on
 Every reward term is a ``RewardTerm``: the built-in ones on their functions in ``cat.envs.mdp.rewards``, terms
 from outside with ``register_reward``. Their weights and constants are config: a built-in term's weight is its
 ``RewardCfg`` field, a registered one's is in ``task.rewards.extra`` (so registering alone changes no env); the
-constants are ``RewardCfg.params`` fields, one shared dataclass because shipped config.yaml files record that
-layout. ``reward_terms`` gives the per-term view, name -> (weight, params).
+constants a term takes (its keyword parameters) are ``RewardCfg.params`` fields for the built-in ones (one shared
+dataclass: shipped config.yaml files record that layout, and some constants are shared on purpose) and
+``task.rewards.extra.<name>.params`` for registered ones. ``reward_terms`` resolves both into name -> (weight,
+params), which the env calls as ``fn(env, **params) * weight``.
 """
 
 from __future__ import annotations
@@ -86,18 +88,28 @@ def _is_builtin(name: str) -> bool:
     return term is not None and term.fn.__module__ == reward_module.__name__
 
 
+def _extra_weight(name: str, entry) -> float:
+    """The weight of a ``task.rewards.extra`` entry: a number, or a mapping ``{weight: w, params: {...}}``."""
+    if isinstance(entry, int | float) and not isinstance(entry, bool):
+        return float(entry)
+    if hasattr(entry, "keys") and "weight" in entry and set(entry.keys()) <= {"weight", "params"}:
+        return float(entry["weight"])
+    raise ValueError(f"task.rewards.extra.{name} must be a weight or {{weight: <w>, params: {{...}}}}, got {entry!r}")
+
+
 def active_rewards(cfg: RewardCfg) -> dict[str, float]:
     """Name -> weight of every reward term with a non-zero weight: the built-in ones in ``RewardCfg``'s field
     order, then ``cfg.extra`` (registered terms) in its order."""
     out = {name: float(getattr(cfg, name)) for name in _builtin_rewards() if getattr(cfg, name) != 0.0}
-    for name, weight in cfg.extra.items():
+    for name, entry in cfg.extra.items():
         if _is_builtin(name):
             raise ValueError(f"task.rewards.extra names built-in reward term {name!r}; set task.rewards.{name}")
         if name not in REWARD_TERMS:
             valid = ", ".join(sorted(n for n in REWARD_TERMS if not _is_builtin(n))) or "none registered"
             raise ValueError(f"task.rewards.extra names unknown reward term {name!r}; registered: {valid}")
+        weight = _extra_weight(name, entry)
         if weight != 0.0:
-            out[name] = float(weight)
+            out[name] = weight
     return out
 
 
@@ -108,11 +120,29 @@ def reward_fn(name: str) -> TermFn:
 
 
 def reward_params(cfg: RewardCfg, name: str) -> dict:
-    """The constants reward term ``name`` reads, by name: ``cfg.params.<p>``, or ``cfg.<p>`` for the few kept
-    beside the weights (``field_vmf_uniform_offset``)."""
-    return {p: getattr(cfg.params, p) if hasattr(cfg.params, p) else getattr(cfg, p) for p in REWARD_TERMS[name].params}
+    """The constants reward term ``name`` is called with, by name. A built-in term's come from config:
+    ``cfg.params.<p>``, or ``cfg.<p>`` for the few kept beside the weights (``field_vmf_uniform_offset``). A
+    registered term's from ``cfg.extra.<name>.params``, else its signature's defaults; a constant with neither, or
+    one the term does not take, is a ``ValueError`` naming it."""
+    term = REWARD_TERMS[name]
+    if _is_builtin(name):
+        return {p: getattr(cfg.params, p) if hasattr(cfg.params, p) else getattr(cfg, p) for p in term.params}
+    entry = cfg.extra.get(name)
+    given = dict(entry.get("params") or {}) if hasattr(entry, "keys") else {}
+    unknown = sorted(set(given) - set(term.params))
+    if unknown:
+        takes = ", ".join(term.params) or "none"
+        raise ValueError(
+            f"task.rewards.extra.{name}.params: {', '.join(unknown)} not taken by the term (takes: {takes})"
+        )
+    out = {**dict(term.defaults), **given}
+    missing = [p for p in term.params if p not in out]
+    if missing:
+        raise ValueError(f"reward term {name!r} needs task.rewards.extra.{name}.params.{missing[0]} (no default)")
+    return {p: out[p] for p in term.params}
 
 
 def reward_terms(cfg: RewardCfg) -> dict[str, tuple[float, dict]]:
-    """Name -> (weight, params) of every active reward term, in the order the env sums them."""
+    """Name -> (weight, params) of every active reward term, in the order the env sums them: the env calls
+    ``fn(env, **params) * weight``."""
     return {name: (weight, reward_params(cfg, name)) for name, weight in active_rewards(cfg).items()}

@@ -1,21 +1,24 @@
 """Terms as declared objects: one ``ObsTerm`` per observation term holds everything the code knows about it; one
-``RewardTerm`` per reward term names the constants it reads.
+``RewardTerm`` per reward term names the constants it takes (its keyword parameters).
 
-A term is a function ``fn(env) -> (N, size)`` plus its declaration (mjlab's pattern: a term is a function and a
-config): its width, how observation noise reads it, its left/right mirror map, whether a deployed robot can
-compute it, its clip and meaning (export metadata) and the config that fixes its width (checkpoint layouts).
+An observation term is a function ``fn(env) -> (N, size)`` plus its declaration (mjlab's pattern: a term is a
+function and a config): its width, how observation noise reads it, its left/right mirror map, whether a deployed
+robot can compute it, its clip and meaning (export metadata) and the config that fixes its width (checkpoint
+layouts).
 The observation groups (``cat.envs.obs_groups``), symmetry (``cat.envs.symmetry``), the export metadata
 (``cat.deploy.metadata``) and the deploy runtime (``cat.deploy.runtime``) all read ``OBS_TERMS``.
 
 Built-in terms are declared with ``@observation_term(...)`` on their function (``cat.envs.mdp.observations``);
 terms from outside the package with ``register_observation`` (the same registry). Reward terms likewise:
-``@reward_term(...)`` in ``cat.envs.mdp.rewards``, ``register_reward`` from outside; their weights and constants
-are config (``RewardCfg``; ``cat.envs.mdp.registry.reward_terms`` gives name -> (weight, params)). Consumers import
+``@reward_term()`` in ``cat.envs.mdp.rewards``, ``register_reward`` from outside; a reward term is
+``fn(env, **params)``, its weight and constants config (``RewardCfg``; ``cat.envs.mdp.registry.reward_terms`` gives
+name -> (weight, params), what the env calls it with). Consumers import
 ``cat.envs.mdp.registry``, which loads the built-in ones. This module imports nothing from the env.
 """
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Literal
@@ -143,12 +146,13 @@ def observation_term(
 
 @dataclass(frozen=True)
 class RewardTerm:
-    """One reward term: ``fn(env)`` -> (N,) per control step, before its weight (``RewardCfg.<name>``, or
-    ``RewardCfg.extra[<name>]`` for a registered term), and the names of the constants it reads
-    (``RewardCfg.params.<name>``, or a field of ``RewardCfg`` itself)."""
+    """One reward term: ``fn(env, **params)`` -> (N,) per control step, before its weight. ``params`` are the
+    names of its keyword parameters (read off the signature: the term's constants, filled from config by
+    ``cat.envs.mdp.registry.reward_terms``), ``defaults`` those of them the signature gives a value."""
 
     fn: TermFn
     params: tuple[str, ...] = ()
+    defaults: tuple[tuple[str, object], ...] = ()
     note: str = ""
 
 
@@ -156,9 +160,27 @@ REWARD_TERMS: dict[str, RewardTerm] = {}
 """Every reward term by name, the built-in ones first in declaration order."""
 
 
-def register_reward(name: str, fn: TermFn, params: tuple[str, ...] = (), note: str = "") -> RewardTerm:
-    """Declare reward term ``name``. A run turns a registered one on with ``task.rewards.extra.<name>=<weight>``.
-    Registering the same function again is a no-op; another function under a taken name is a ``ValueError``."""
+def _signature_params(name: str, fn: TermFn) -> tuple[tuple[str, ...], tuple[tuple[str, object], ...]]:
+    """The constants of ``fn(env, *, a, b=1.0)``: its parameters after the env, and the defaults among them."""
+    try:
+        sig = inspect.signature(fn)
+    except (TypeError, ValueError) as err:
+        raise ValueError(f"reward term {name!r}: cannot read the signature of {fn!r} ({err})") from None
+    ps = list(sig.parameters.values())
+    if not ps or ps[0].kind not in (ps[0].POSITIONAL_ONLY, ps[0].POSITIONAL_OR_KEYWORD):
+        raise ValueError(f"reward term {name!r}: its function must take the env as its first argument")
+    rest = ps[1:]
+    bad = [p.name for p in rest if p.kind in (p.VAR_POSITIONAL, p.VAR_KEYWORD, p.POSITIONAL_ONLY)]
+    if bad:
+        raise ValueError(f"reward term {name!r}: constants must be named parameters, not {', '.join(bad)}")
+    return tuple(p.name for p in rest), tuple((p.name, p.default) for p in rest if p.default is not p.empty)
+
+
+def register_reward(name: str, fn: TermFn, note: str = "") -> RewardTerm:
+    """Declare reward term ``name``: ``fn(env, **constants)``. A run turns a registered one on with
+    ``task.rewards.extra.<name>=<weight>`` (or ``{weight: w, params: {...}}``: its constants, defaults from the
+    signature). Registering the same function again is a no-op; another function under a taken name is a
+    ``ValueError``."""
     old = REWARD_TERMS.get(name)
     if old is not None:
         if old.fn is fn:
@@ -167,15 +189,16 @@ def register_reward(name: str, fn: TermFn, params: tuple[str, ...] = (), note: s
         if owner == "cat.envs.mdp.rewards":
             raise ValueError(f"reward term {name!r} is built in (cat.envs.mdp.rewards)")
         raise ValueError(f"reward term {name!r} is already registered (by {owner})")
-    term = REWARD_TERMS[name] = RewardTerm(fn, tuple(params), note)
+    params, defaults = _signature_params(name, fn)
+    term = REWARD_TERMS[name] = RewardTerm(fn, params, defaults, note)
     return term
 
 
-def reward_term(params: tuple[str, ...] = (), note: str = "") -> Callable[[TermFn], TermFn]:
+def reward_term(note: str = "") -> Callable[[TermFn], TermFn]:
     """Decorator form of ``register_reward`` under the function's name (the built-in terms' declaration)."""
 
     def declare(fn: TermFn) -> TermFn:
-        register_reward(fn.__name__, fn, params, note)
+        register_reward(fn.__name__, fn, note)
         return fn
 
     return declare

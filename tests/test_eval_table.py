@@ -18,7 +18,7 @@ import pytest
 import yaml
 
 from cat.eval import evaluate as evaluate_mod
-from cat.eval.evaluate import EvalTableCfg, evaluate
+from cat.eval.evaluate import EvalTableCfg, evaluate, scene_groups
 from cat.eval.manifest import ManifestError, load_manifest
 from cat.eval.runner import run_scene_group
 from cat.learning.hydra_cfg import load_config
@@ -223,10 +223,30 @@ def test_per_type_row_plays_each_column_with_its_own_checkpoint(tmp_path, checkp
     assert "| Spec |" not in files["table2.md"] and "| Ours |" in files["table2.md"]
 
 
-def test_shipped_table1_manifest_names_shipped_checkpoints(monkeypatch):
-    """configs/eval/table1.yaml stays in step with checkpoints/ (a re-shipped specialist renames its file)."""
+def test_unseen_shapes_table_plays_other_scenes_of_the_same_layouts(tmp_path):
+    """``table1: {shapes: unseen}`` plays the typical layouts built from unseen obstacle shapes: the same starts and
+    goals as the paper shapes' table, other scenes (meshes), and the caption says which scenes they are."""
+    base = {"methods": {"Hold": ["hold"]}}
+    paper = _manifest(tmp_path / "p.yaml", **base, table1={"scene_seed": 1000, "variants": 1})
+    unseen = _manifest(tmp_path / "u.yaml", **base, table1={"scene_seed": 1000, "variants": 1, "shapes": "unseen"})
+    (a, _), (b, files) = (
+        evaluate(EvalTableCfg(manifest=str(m), out=str(tmp_path / m.stem), trials_per_scene=1, time_s=0.6))
+        for m in (paper, unseen)
+    )
+    assert [(r["group"], r["start_x"], r["goal_x"]) for r in a] == [(r["group"], r["start_x"], r["goal_x"]) for r in b]
+    groups = [scene_groups(load_manifest(m))["table1"] for m in (paper, unseen)]
+    for g_paper, g_unseen in zip(*groups, strict=True):
+        assert g_paper.name == g_unseen.name and g_unseen.scenes[0].meta["shapes"] == "unseen"
+        assert not np.array_equal(g_paper.scenes[0].mesh.vertices, g_unseen.scenes[0].mesh.vertices)
+    assert "built from unseen obstacle shapes (scene seeds 1000..1000)" in files["table1.md"]
+
+
+@pytest.mark.parametrize("name", ["table1", "typical_unseen"])
+def test_shipped_table1_manifest_names_shipped_checkpoints(monkeypatch, name):
+    """configs/eval/table1.yaml (and its unseen-shapes twin) stays in step with checkpoints/ (a re-shipped
+    specialist renames its file)."""
     monkeypatch.chdir(REPO)  # the manifest's paths are relative to the repository root
-    man = load_manifest(REPO / "configs" / "eval" / "table1.yaml")
+    man = load_manifest(REPO / "configs" / "eval" / f"{name}.yaml")
     assert man.table1 is not None and all(Path(r.checkpoint).is_file() for rs in man.methods.values() for r in rs)
     kinds = {r.kind for r in man.methods["Ours (specialists)"]}
     assert kinds <= set(TYPICAL_KINDS) and len(kinds) >= 4
@@ -242,6 +262,10 @@ def test_bad_input_names_the_problem_and_writes_nothing(tmp_path, checkpoints, s
         "unknown_method": ({"methods": {"A": ["ppo_baseline"]}, "table1": {}}, "unknown method 'ppo_baseline'"),
         "unknown_key": ({"methods": {"A": [ok]}, "table4": {}}, "unknown manifest key 'table4'"),
         "unknown_t1": ({"methods": {"A": [ok]}, "table1": {"scene_sed": 0}}, "unknown table1 key 'scene_sed'"),
+        "bad_shapes": (
+            {"methods": {"A": [ok]}, "table1": {"shapes": "novel"}},
+            "table1 shapes must be one of paper, unseen, got 'novel'",
+        ),
         "empty_dir": (
             {"methods": {"A": [ok]}, "table2": {"easy": str(empty)}},
             f"no scenes (scene.json) under {empty}",

@@ -120,3 +120,25 @@ def test_warmup_extremes():
         assert widths[0] <= 0.06 and widths[1] >= 0.14, (kind, widths)  # (jitter)
     with pytest.raises(SceneError, match="difficulty"):
         make_typical("hurdle-crouch", -1.5)
+
+
+@pytest.mark.parametrize("kind", TYPICAL_KINDS)
+def test_unseen_shapes_keep_the_layout_and_change_every_obstacle(kind):
+    """``shapes="unseen"`` (the evaluation set of configs/eval/typical_unseen.yaml): valid scenes (watertight, start
+    and goal free, goal reachable, every part seen by the field grid) with the paper scenes' bounds, start region
+    and goal, none equal to a training scene of any seed the training sets use, and the same difficulty order."""
+    unseen = typical_variants(kind, 8, seed=1000, shapes="unseen")
+    training = {s.mesh.vertices.round(6).tobytes() for seed in (0, 1000) for s in typical_variants(kind, 10, seed)}
+    for u in unseen:
+        assert u.kind == kind and u.mesh.is_watertight and u.meta["shapes"] == "unseen"
+        check_scene(u)
+        assert u.unseen_parts() == [], (kind, u.difficulty)
+        np.testing.assert_array_equal(u.start_region, make_typical(kind, u.difficulty, u.seed).start_region)
+        np.testing.assert_allclose(u.goals, [[2, 0, 0.75]])
+        assert u.mesh.vertices.round(6).tobytes() not in training
+    again = make_typical(kind, unseen[3].difficulty, unseen[3].seed, "unseen")
+    np.testing.assert_array_equal(again.mesh.vertices, unseen[3].mesh.vertices)
+    free = [free_volume_fraction(s.occupancy()) for s in (unseen[0], unseen[-1])]
+    assert free[0] > free[1], free
+    with pytest.raises(SceneError, match="unknown typical shapes 'odd'; valid: paper, unseen"):
+        make_typical(kind, 0.5, 0, "odd")

@@ -7,7 +7,8 @@ methods:                  # table row -> one checkpoint per training seed; `hold
   Specialists:            # or, for Table I only: scene type -> its own checkpoints (a specialist per column)
     hurdle-pass: [checkpoints/hurdle_pass/model_2712.pt]
     crouch-pass: [checkpoints/crouch_pass/model_599.pt]
-table1: {scene_seed: 0}   # optional: the 8 typical types, 10 variants each (paper Table I); `variants: n`
+table1: {scene_seed: 0}   # optional: the 8 typical types, 10 variants each (paper Table I); `variants: n`,
+                          # `shapes: unseen` (the same layouts from obstacle shapes no training scene has)
 table2:                   # optional: unseen scene folders (paper Table II), one column per entry
   easy: data/test_unseen/easy
   hard: data/test_unseen/hard
@@ -32,13 +33,14 @@ import yaml
 
 from cat.checkpoint_io import CheckpointError
 from cat.envs.obs_groups import groups_layout
-from cat.learning.config import TrainCfg, policy_model
-from cat.learning.run_config import load_run_config
+from cat.run.config import TrainCfg, policy_model
+from cat.run.config_file import load_run_config
 from cat.terrain import TYPICAL_KINDS
+from cat.terrain.typical import SHAPES as TYPICAL_SHAPES
 
 HOLD = "hold"
 TOP_KEYS = ("methods", "table1", "table2", "table3")
-TABLE1_KEYS = ("scene_seed", "variants")
+TABLE1_KEYS = ("scene_seed", "variants", "shapes")
 TABLE3_KINDS = ("crouch-pass", "hurdle-pass", "side-pass", "hurdle-crouch")  # paper Table III's columns
 
 
@@ -64,7 +66,7 @@ class MethodRun:
 @dataclass
 class Manifest:
     methods: dict[str, list[MethodRun]]
-    table1: dict | None = None  # {"scene_seed": int, "variants": int}
+    table1: dict | None = None  # {"scene_seed": int, "variants": int, "shapes": "paper" | "unseen"}
     table2: dict[str, str] = field(default_factory=dict)  # column -> scene folder
     table3: dict | None = None  # {"scene_seed": int, "variants": int, "kinds": [typical types]}
 
@@ -171,7 +173,10 @@ def _table1(raw) -> dict:
     for k, v in out.items():
         if not isinstance(v, int) or isinstance(v, bool) or (k == "variants" and v < 1):
             raise ManifestError(f"table1 {k} must be a {'positive ' if k == 'variants' else ''}integer, got {v!r}")
-    return out
+    shapes = raw.get("shapes", "paper")
+    if shapes not in TYPICAL_SHAPES:
+        raise ManifestError(f"table1 shapes must be one of {', '.join(TYPICAL_SHAPES)}, got {shapes!r}")
+    return {**out, "shapes": shapes}
 
 
 def _table3(raw) -> dict:

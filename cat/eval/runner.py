@@ -64,9 +64,10 @@ class SceneGroup:
     fields: list[list[Field]] = field(repr=False)
 
     @classmethod
-    def typical(cls, kind: str, variants: int, scene_seed: int) -> SceneGroup:
-        """The typical scenes of ``kind`` (seeds scene_seed..+variants-1), exactly as training builds them."""
-        scenes = typical_variants(kind, variants, scene_seed)
+    def typical(cls, kind: str, variants: int, scene_seed: int, shapes: str = "paper") -> SceneGroup:
+        """The typical scenes of ``kind`` (seeds scene_seed..+variants-1), exactly as training builds them
+        (``shapes="unseen"``: the same layouts from obstacle shapes no training scene has)."""
+        scenes = typical_variants(kind, variants, scene_seed, shapes)
         names = [f"{kind}_{i:02d}" for i in range(variants)]
         return cls(kind, scenes, names, [scene_fields(s, None, None) for s in scenes])
 

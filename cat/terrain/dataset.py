@@ -26,6 +26,7 @@ from cat.terrain.furniture import House
 from cat.terrain.indoor import make_indoor
 from cat.terrain.procedural import make_procedural
 from cat.terrain.scene import SCENE_FILE, Scene
+from cat.terrain.typical import SHAPES as TYPICAL_SHAPES
 from cat.terrain.typical import TYPICAL_KINDS, make_typical
 
 log = logging.getLogger(__name__)
@@ -40,6 +41,9 @@ class GenScenesCfg:
     seed: int = 0
     typical_variants: int = 10  # per typical type; difficulties spread over [0, 1]
     typical_kinds: list[str] = field(default_factory=lambda: list(TYPICAL_KINDS))
+    # paper: the paper's building blocks; unseen: the same layouts from obstacle shapes no training scene has
+    # (cat.terrain.typical; for evaluation, never for training)
+    typical_shapes: str = "paper"
     procedural: int = 20
     # a training data group of the paper (cat.terrain.data_groups): only the procedural scenes it selects from the
     # `procedural` ones spread over [difficulty_min, difficulty_max]; "all" or None: every one
@@ -67,13 +71,16 @@ def jobs(cfg: GenScenesCfg) -> list[Job]:
     """Every scene the config asks for, in a fixed order with fixed seeds."""
     out = Path(cfg.out)
     todo: list[Job] = []
+    if cfg.typical_shapes not in TYPICAL_SHAPES:
+        raise ValueError(f"unknown typical_shapes {cfg.typical_shapes!r}; valid: {', '.join(TYPICAL_SHAPES)}")
     for kind in cfg.typical_kinds:
         if kind not in TYPICAL_KINDS:
             raise ValueError(f"unknown typical kind {kind!r}; valid: {', '.join(TYPICAL_KINDS)}")
         n = cfg.typical_variants
         for v, d in enumerate(_spread(0.0, 1.0, n, single=0.5)):
             seed = cfg.seed * 1000 + v
-            todo.append(Job(out / "typical" / f"{kind}_{v:02d}", _bind(make_typical, kind, float(d), seed)))
+            make = _bind(make_typical, kind, float(d), seed, cfg.typical_shapes)
+            todo.append(Job(out / "typical" / f"{kind}_{v:02d}", make))
     n = cfg.procedural
     if not 0.0 <= cfg.difficulty_min <= cfg.difficulty_max <= 1.0:
         lo, hi = cfg.difficulty_min, cfg.difficulty_max

@@ -46,6 +46,16 @@ def vcylinder(center_xy, radius: float, z0: float, z1: float, sections: int = 16
     return cyl
 
 
+def xz_prism(polygon_xz, y0: float, y1: float) -> trimesh.Trimesh:
+    """Convex prism: the convex polygon ``polygon_xz`` [(x, z), ...] in the x-z plane, extruded from ``y0`` to
+    ``y1`` (a wedge, a sloped slab across the course)."""
+    pts = np.asarray(polygon_xz, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) < 3 or not y1 > y0:
+        raise ValueError(f"xz_prism needs >= 3 (x, z) points and y1 > y0, got {pts.tolist()}, {y0}, {y1}")
+    xyz = np.concatenate([np.column_stack((pts[:, 0], np.full(len(pts), y), pts[:, 1])) for y in (y0, y1)])
+    return trimesh.convex.convex_hull(xyz)
+
+
 def crop_parts(parts: list[trimesh.Trimesh], lo, hi) -> list[trimesh.Trimesh]:
     """Clip every part to the box [lo, hi].
 

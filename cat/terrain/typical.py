@@ -14,6 +14,12 @@ needed for a G1 to physically pass):
 Arrows read easy → hard (d = 0 → 1). Positions, gaps and small per-variant jitter come from the seed;
 sizes grow monotonically with d for a fixed seed, so the free-volume fraction falls with d.
 
+``shapes="unseen"`` builds the same layouts (the same draws of positions, gaps and sizes for a seed) from
+obstacle shapes no training scene has: a hurdle is a square beam, a wedge or a row of blocks; a ceiling a pair of
+pipes, a sloped slab or a thin table top; a slit wall a deep cabinet or a pillar beside a wall; a corridor side a
+row of furniture blocks of mixed heights, none inside the channel. The evaluation of skills on shapes never
+trained on (``configs/eval/typical_unseen.yaml``); the shape draws use a generator of their own.
+
 Negative difficulties (d ∈ [−1, 0)) interpolate from trivially easy values to the paper's easiest at d = 0, one
 skill after the other: bars rise from ``BAR_TOP_WARMUP`` (4.5 cm) to 8 cm and widen from 5 cm to the paper's
 16 cm over d ∈ [−1, −0.5] (over all of [−1, 0] in types without a ceiling) under a ceiling out of reach, then
@@ -33,7 +39,7 @@ from collections.abc import Callable
 import numpy as np
 import trimesh
 
-from cat.terrain.primitives import bar, box, combine, crop_parts
+from cat.terrain.primitives import bar, box, combine, crop_parts, vcylinder, xz_prism
 from cat.terrain.scene import GOAL_HEIGHT, Scene, SceneError
 
 TYPICAL_KINDS = (
@@ -75,11 +81,15 @@ def lerp(a: float, b: float, t: float) -> float:
     return float(a + (b - a) * np.clip(t, 0.0, 1.0))
 
 
-class _Params:
-    """Difficulty-driven parameters with a small per-seed jitter (monotone in d for a fixed seed)."""
+SHAPES = ("paper", "unseen")  # the paper's building blocks (training, Table I) | shapes no training scene has
 
-    def __init__(self, d: float, rng: np.random.Generator):
-        self.d, self.rng = d, rng
+
+class _Params:
+    """Difficulty-driven parameters with a small per-seed jitter (monotone in d for a fixed seed); ``srng`` draws
+    the unseen shapes (None: the paper's), apart from ``rng`` so a seed's layout is the same in both."""
+
+    def __init__(self, d: float, rng: np.random.Generator, srng: np.random.Generator | None = None):
+        self.d, self.rng, self.srng = d, rng, srng
 
     def __call__(
         self,
@@ -106,11 +116,15 @@ def _bar(p: _Params, span: tuple[float, float] = BAR_SPAN) -> Element:
     """Hurdle bar; ``span``: the warm-up range of d over which it grows (all of [−1, 0] when no ceiling follows)."""
     top = p(0.08, 0.25, trivial=BAR_TOP_WARMUP, span=span)
     r = max(p(0.08, 0.15, trivial=BAR_RADIUS_WARMUP, span=span), top / 2)  # resting on the floor
+    if p.srng is not None:
+        return _unseen_hurdle(p.srng, top, 2 * r)
     return 2 * r, lambda x0: [bar("y", (x0 + r, 0.0, top - r), r, 2 * HALF_W)]
 
 
 def _ceiling(p: _Params, depth: tuple[float, float] = (0.3, 0.6)) -> Element:
     bottom, dep = p(1.15, 1.00, trivial=CLEAR_CEILING, span=CEILING_SPAN), p(*depth)
+    if p.srng is not None:
+        return dep, _unseen_ceiling(p.srng, bottom, dep)
     return dep, lambda x0: [box((x0, -HALF_W, bottom), (x0 + dep, HALF_W, HEIGHT))]
 
 
@@ -123,6 +137,8 @@ def _slit(p: _Params, yc: float | None = None) -> Element:
     gap = p(0.90, 0.32, jitter=0.05, trivial=1.3)
     if yc is None:
         yc = p.rng.uniform(-1, 1) * (HALF_W - 0.15 - gap / 2) * 0.6
+    if p.srng is not None:
+        return _unseen_slit(p.srng, gap, yc)
     return WALL_T, lambda x0: _slit_parts(x0, gap, yc)
 
 
@@ -130,11 +146,104 @@ def _low_door(p: _Params) -> Element:
     """Slit wall whose gap is capped by a lintel, continued by a ceiling: side-step and crouch at once."""
     gap, yc = p(0.90, 0.36, jitter=0.05, trivial=1.3, span=BAR_SPAN), p.rng.uniform(-0.25, 0.25)
     bottom, dep = p(1.15, 1.00, trivial=CLEAR_CEILING, span=CEILING_SPAN), p(0.2, 0.5)
+    if p.srng is not None:
+        wall, walls = _unseen_slit(p.srng, gap, yc)
+        ceiling = _unseen_ceiling(p.srng, bottom, wall + dep)
+        return wall + dep, lambda x0: walls(x0) + ceiling(x0)
 
     def build(x0: float) -> list[trimesh.Trimesh]:
         return _slit_parts(x0, gap, yc) + [box((x0, -HALF_W, bottom), (x0 + WALL_T + dep, HALF_W, HEIGHT))]
 
     return WALL_T + dep, build
+
+
+UNSEEN_SHAPES_STREAM = 7  # the unseen shapes' generator: default_rng([seed, kind index, 7])
+
+
+def _unseen_hurdle(rng: np.random.Generator, top: float, width: float) -> Element:
+    """A hurdle of the bar's top and footprint: a square beam, a wedge rising to ``top``, or a row of blocks with
+    4 cm gaps (heights 80-100 % of ``top``)."""
+    style = int(rng.integers(3))
+    if style == 0:
+        return width, lambda x0: [box((x0, -HALF_W, 0.0), (x0 + width, HALF_W, top))]
+    if style == 1:
+        depth = width
+        up = bool(rng.integers(2))  # the steep face toward the robot or away from it
+        tri = [(0.0, 0.0), (depth, 0.0), (depth, top)] if up else [(0.0, 0.0), (depth, 0.0), (0.0, top)]
+        return depth, lambda x0: [xz_prism([(x0 + x, z) for x, z in tri], -HALF_W, HALF_W)]
+    edges = [-HALF_W]
+    while edges[-1] < HALF_W:
+        edges.append(edges[-1] + float(rng.uniform(0.25, 0.5)))
+    heights = rng.uniform(0.8, 1.0, len(edges) - 1) * top
+
+    def blocks(x0: float) -> list[trimesh.Trimesh]:
+        return [
+            box((x0, a + 0.02, 0.0), (x0 + width, b - 0.02, float(h)))
+            for a, b, h in zip(edges[:-1], edges[1:], heights, strict=True)
+        ]
+
+    return width, blocks
+
+
+def _unseen_ceiling(rng: np.random.Generator, bottom: float, depth: float) -> Callable[[float], list[trimesh.Trimesh]]:
+    """What hangs at ``bottom`` over ``depth`` of course: two pipes at its ends, a slab whose underside slopes
+    from 12 cm higher down to ``bottom``, or a 4 cm table top with free space above."""
+    style = int(rng.integers(3))
+    if style == 0:
+        r = float(rng.uniform(0.05, 0.1))
+        return lambda x0: [
+            bar("y", (x0 + x, 0.0, bottom + r), r, 2 * HALF_W) for x in (r, max(depth - r, r))
+        ]  # fmt: skip
+    if style == 1:
+        rise = 0.12
+        return lambda x0: [
+            xz_prism([(x0, bottom + rise), (x0 + depth, bottom), (x0 + depth, HEIGHT), (x0, HEIGHT)], -HALF_W, HALF_W)
+        ]
+    return lambda x0: [box((x0, -HALF_W, bottom), (x0 + depth, HALF_W, bottom + 0.04))]
+
+
+def _unseen_slit(rng: np.random.Generator, gap: float, yc: float) -> Element:
+    """A gap of width ``gap`` at ``yc``: between two deep cabinets (0.25-0.35 m, full height), or between a
+    pillar (radius 6-10 cm) on one side and a wall on the other."""
+    lo, hi = yc - gap / 2, yc + gap / 2
+    if int(rng.integers(2)) == 0:
+        deep = float(rng.uniform(0.25, 0.35))
+        return deep, lambda x0: [
+            box((x0, -HALF_W, 0.0), (x0 + deep, lo, HEIGHT)),
+            box((x0, hi, 0.0), (x0 + deep, HALF_W, HEIGHT)),
+        ]
+    r = float(rng.uniform(0.06, 0.1))
+    left = bool(rng.integers(2))  # the pillar's side
+
+    def parts(x0: float) -> list[trimesh.Trimesh]:
+        if left:  # pillar at the low-y edge of the gap, a thin wall behind it to the side; a wall on the other side
+            return [vcylinder((x0 + r, lo - r), r, 0.0, HEIGHT), box((x0, -HALF_W, 0.0), (x0 + 2 * r, lo - r, HEIGHT)),
+                    box((x0, hi, 0.0), (x0 + 2 * r, HALF_W, HEIGHT))]  # fmt: skip
+        return [vcylinder((x0 + r, hi + r), r, 0.0, HEIGHT), box((x0, hi + r, 0.0), (x0 + 2 * r, HALF_W, HEIGHT)),
+                box((x0, -HALF_W, 0.0), (x0 + 2 * r, lo, HEIGHT))]  # fmt: skip
+
+    return 2 * r, parts
+
+
+def _unseen_corridor(rng: np.random.Generator, half: float, x0: float, x1: float) -> list[trimesh.Trimesh]:
+    """Each side of a channel of half-width ``half``: furniture blocks 0.25-0.5 m long, 0.8 m to full height,
+    their inner faces 0-10 cm back from the channel (never inside it; one of them at its edge)."""
+    parts = []
+    for sign in (-1.0, 1.0):
+        x, side = x0, []
+        while x < x1:
+            length = float(rng.uniform(0.25, 0.5))
+            length = x1 - x if x1 - x - length < 0.1 else length  # no sliver at the end
+            side.append(
+                [x, x + length, float(rng.uniform(0.0, 0.1)), float(rng.choice([rng.uniform(0.8, 1.0), HEIGHT]))]
+            )
+            x += length
+        side[int(rng.integers(len(side)))][2] = 0.0  # the channel is exactly as narrow as the paper's somewhere
+        for a, b, back, h in side:
+            inner = half + back
+            lo, hi = (-HALF_W, -inner) if sign < 0 else (inner, HALF_W)
+            parts.append(box((a, lo, 0.0), (b, hi, h)))
+    return parts
 
 
 def _sequence(elements: list[Element], rng: np.random.Generator, min_gap: float = 0.25) -> list[trimesh.Trimesh]:
@@ -159,6 +268,8 @@ def _sequence(elements: list[Element], rng: np.random.Generator, min_gap: float 
 def _corridor(p: _Params) -> list[trimesh.Trimesh]:
     half = p(1.3, 0.75, jitter=0.05, trivial=1.8) / 2
     x0, x1 = COURSE[0] - 0.05, COURSE[1] - 0.05
+    if p.srng is not None:
+        return _unseen_corridor(p.srng, half, x0, x1)
     return [box((x0, -HALF_W, 0.0), (x1, -half, HEIGHT)), box((x0, half, 0.0), (x1, HALF_W, HEIGHT))]
 
 
@@ -185,15 +296,19 @@ def _layout(kind: str, p: _Params) -> list[trimesh.Trimesh]:
     raise SceneError(f"unknown typical scene type {kind!r}; valid: {', '.join(TYPICAL_KINDS)}")
 
 
-def make_typical(kind: str, difficulty: float = 0.5, seed: int = 0) -> Scene:
-    """One typical scene of ``kind`` (see ``TYPICAL_KINDS``); deterministic in (kind, difficulty, seed).
+def make_typical(kind: str, difficulty: float = 0.5, seed: int = 0, shapes: str = "paper") -> Scene:
+    """One typical scene of ``kind`` (see ``TYPICAL_KINDS``); deterministic in (kind, difficulty, seed, shapes).
 
-    ``difficulty`` ∈ [0, 1] spans the paper's range; [−1, 0) is the training-only warm-up range.
+    ``difficulty`` ∈ [0, 1] spans the paper's range; [−1, 0) is the training-only warm-up range. ``shapes``: the
+    paper's building blocks, or ``unseen`` ones (module docstring; evaluation only, never a training scene).
     """
     if not -1.0 <= difficulty <= 1.0:
         raise SceneError(f"difficulty must be in [-1, 1] ([0, 1] for the paper's scenes), got {difficulty}")
-    rng = np.random.default_rng([seed, TYPICAL_KINDS.index(kind) if kind in TYPICAL_KINDS else 99])
-    parts = crop_parts(_layout(kind, _Params(difficulty, rng)), BOUNDS[0], BOUNDS[1])
+    if shapes not in SHAPES:
+        raise SceneError(f"unknown typical shapes {shapes!r}; valid: {', '.join(SHAPES)}")
+    key = [seed, TYPICAL_KINDS.index(kind) if kind in TYPICAL_KINDS else 99]
+    srng = np.random.default_rng([*key, UNSEEN_SHAPES_STREAM]) if shapes == "unseen" else None
+    parts = crop_parts(_layout(kind, _Params(difficulty, np.random.default_rng(key), srng)), BOUNDS[0], BOUNDS[1])
     return Scene(
         mesh=combine(parts),
         bounds=BOUNDS.copy(),
@@ -203,14 +318,14 @@ def make_typical(kind: str, difficulty: float = 0.5, seed: int = 0) -> Scene:
         difficulty=float(difficulty),
         seed=int(seed),
         start_region=START_REGION.copy(),
-        meta={"family": "typical", "primitive_parts": True},
+        meta={"family": "typical", "primitive_parts": True, **({"shapes": shapes} if shapes != "paper" else {})},
     )
 
 
-def typical_variants(kind: str, n: int = 10, seed: int = 0) -> list[Scene]:
+def typical_variants(kind: str, n: int = 10, seed: int = 0, shapes: str = "paper") -> list[Scene]:
     """``n`` variants of ``kind`` with difficulties spread evenly over [0, 1] and seeds seed..seed+n-1."""
     ds = np.linspace(0.0, 1.0, n) if n > 1 else np.array([0.5])
-    return [make_typical(kind, float(d), seed + i) for i, d in enumerate(ds)]
+    return [make_typical(kind, float(d), seed + i, shapes) for i, d in enumerate(ds)]
 
 
 WARMUP_SEED_OFFSET = 10_000  # warm-up scenes never share a seed with the paper's variants

@@ -25,6 +25,9 @@ def test_recorder_wraps_and_restores():
         assert rew.nonfinite == 4
         rew.saved["alive"] = alive
     assert rew_terms.alive is alive
+    with _Recorder(rew_terms, list(env.reward_names)) as every:  # terms with constants: called with their params
+        env.step(torch.zeros(4, env.num_actions))
+        assert every.nonfinite == 0
 
 
 def test_termination_causes_survive_the_reset():

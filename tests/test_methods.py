@@ -110,15 +110,21 @@ def test_map_clearance_on_an_analytic_scene():
     assert g.max() > 0.05 and o.min() < 1.3, "the scene has a hurdle and a ceiling on its course"
     x_hurdle, x_ceiling, x_open = xs[g.argmax()], xs[o.argmin()], xs[(g == 0) & (o == o.max())][0]
     links = env.state.link_pos
+    weight, params = env.reward_terms["map_clearance"]
+    assert weight < 0 and params == {"barrier_margin": 0.05, "barrier_width": 0.02}
+
+    def penalty() -> float:
+        return float(rew.map_clearance(env, **params))
+
     links[:] = torch.tensor([x_open, 0.0, 0.6])  # every link in the open: no penalty
-    assert float(rew.map_clearance(env)) == 0.0
+    assert penalty() == 0.0
     links[0, 0] = torch.tensor([x_hurdle, 0.0, float(g.max())])  # one link at the hurdle's top
-    at_top = float(rew.map_clearance(env))
+    at_top = penalty()
     links[0, 0, 2] += 0.3
     assert at_top == pytest.approx(math.log1p(math.exp(0.05 / 0.02)), rel=1e-3)
-    assert float(rew.map_clearance(env)) < 1e-4
+    assert penalty() < 1e-4
     links[0, 0] = torch.tensor([x_ceiling, 0.0, float(o.min()) - 0.05])  # 5 cm below the underside
-    assert float(rew.map_clearance(env)) == pytest.approx(math.log(2.0), rel=1e-3)
+    assert penalty() == pytest.approx(math.log(2.0), rel=1e-3)
 
 
 @pytest.fixture(scope="module")

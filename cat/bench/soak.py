@@ -73,8 +73,8 @@ class _Recorder:
             setattr(self.module, name, fn)
 
     def _wrap(self, fn):
-        def wrapped(env):
-            value = fn(env)
+        def wrapped(env, **params):
+            value = fn(env, **params)
             self.nonfinite += int((~torch.isfinite(value)).sum())
             return value
 

@@ -19,6 +19,7 @@ import mujoco
 import numpy as np
 import yaml
 
+from cat.envs.sim.base import write_pd_gains
 from cat.terrain.mujoco_export import OBSTACLE_BIT, OBSTACLE_BODY  # noqa: F401  (the one definition, re-exported)
 
 FLOOR_BIT = 2
@@ -187,9 +188,7 @@ def _configure_actuators(spec: mujoco.MjSpec, cfg: RobotCfg) -> None:
         raise ValueError(f"robot yaml joint order differs from the model's actuators: {names}")
     for act, kp, kd, tau in zip(spec.actuators, cfg.kp, cfg.kd, cfg.torque_limit, strict=True):
         # Position servo: force = kp (ctrl - q) - kd qdot, clamped to the torque limit.
-        act.gainprm[0] = kp
-        act.biasprm[1] = -kp
-        act.biasprm[2] = -kd
+        write_pd_gains(act.gainprm, act.biasprm, kp, kd)
         act.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
         act.forcerange = [-tau, tau]
 

@@ -31,6 +31,17 @@ PART_SENSOR_PREFIX = "obstacle_contact_"
 """Prefix of the per-body obstacle contact sensors (``cat.envs.scene.part_obstacle_sensor``), max over substeps too."""
 
 
+def write_pd_gains(gainprm, biasprm, kp, kd, rows=None) -> None:
+    """MuJoCo's encoding of a position servo's PD gains, written in this one place: force = gain0 ctrl + bias1 q +
+    bias2 qdot with gain0 = kp, bias1 = -kp, bias2 = -kd. ``gainprm`` / ``biasprm``: an actuator's (10,) arrays
+    (MjSpec), a model's (nu, 10) or per-world (N, nu, 10) arrays (numpy or torch, written in place); ``rows``
+    indexes their leading dimension (e.g. the worlds to change; None: all)."""
+    idx = () if rows is None else (rows,)
+    gainprm[(*idx, Ellipsis, 0)] = kp
+    biasprm[(*idx, Ellipsis, 1)] = -kp
+    biasprm[(*idx, Ellipsis, 2)] = -kd
+
+
 @dataclass
 class SensorSlice:
     """Where one named sensor lives in ``sensordata``."""

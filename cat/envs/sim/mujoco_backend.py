@@ -23,15 +23,13 @@ import numpy as np
 import torch
 from mujoco import rollout
 
-from cat.envs.sim.base import PhysicsBackend, as_index, state_layout
+from cat.envs.sim.base import PhysicsBackend, as_index, state_layout, write_pd_gains
 from cat.envs.sim.layout import check_compatible, check_same_layout, data_layout
 
 
 def set_model_gains(m: mujoco.MjModel, kp: np.ndarray, kd: np.ndarray) -> None:
     """PD gains (nu,) of a model's position actuators."""
-    m.actuator_gainprm[:, 0] = kp
-    m.actuator_biasprm[:, 1] = -kp
-    m.actuator_biasprm[:, 2] = -kd
+    write_pd_gains(m.actuator_gainprm, m.actuator_biasprm, kp, kd)
 
 
 def set_model_mass_scale(m: mujoco.MjModel, scale, mass0: np.ndarray, inertia0: np.ndarray) -> None:

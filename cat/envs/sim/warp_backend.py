@@ -48,7 +48,7 @@ import numpy as np
 import torch
 import warp as wp
 
-from cat.envs.sim.base import PhysicsBackend
+from cat.envs.sim.base import PhysicsBackend, write_pd_gains
 from cat.envs.sim.warp_slots import SLOT_FIELDS, SlotTable, SlotWriter
 from cat.fields import init_warp
 
@@ -372,9 +372,7 @@ class WarpBackend(PhysicsBackend):
         bias = wp.to_torch(self.m.actuator_biasprm)
         kp, kd = kp.to(gain), kd.to(gain)
         with self._sim_stream():
-            gain[ids, :, 0] = kp
-            bias[ids, :, 1] = -kp
-            bias[ids, :, 2] = -kd
+            write_pd_gains(gain, bias, kp, kd, rows=ids)
 
     def set_body_mass_scale(self, env_ids: torch.Tensor, scale: torch.Tensor) -> None:
         """Scale body masses and inertias per world; subtree masses follow (MuJoCo uses them for the COM)."""

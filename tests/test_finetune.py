@@ -6,12 +6,13 @@ from pathlib import Path
 
 import pytest
 import torch
+from rsl_rl.algorithms import PPO
 
 from cat.envs.config import ACTOR_TERMS, EnvCfg, ObsGroupCfg
-from cat.learning.finetune import install_critic_warmup
+from cat.learning.finetune import CriticWarmupPPO
 from cat.learning.hydra_cfg import load_config
 from cat.learning.runs import make_env, make_runner, save_config, train, validate_train_cfg
-from cat.run.config import AlgoCfg, DistillCfg, TrainCfg, policy_model
+from cat.run.config import AlgoCfg, DistillCfg, TrainCfg, policy_model, runner_cfg
 
 STUDENT_GROUPS = ["student_proprio", "student"]
 
@@ -90,23 +91,33 @@ def test_the_student_becomes_the_actor_and_only_the_critic_learns_during_warm_up
     assert any(not torch.equal(after[k], v) for k, v in _params(src, "mlp.").items())  # then the actor does too
 
 
-def test_the_warm_up_trains_the_critic_unclipped_at_its_own_rate_then_restores_ppo(tmp_path):
+def test_the_warm_up_trains_the_critic_unclipped_at_its_own_rate_then_restores_ppo(tmp_path, monkeypatch):
+    """The warm-up is PPO extended by subclass, named through the algorithm's class_name; a run resumed past the
+    warm-up is plain PPO."""
     cfg = _finetune_cfg(Path("unused"), tmp_path)
     cfg.init = None
+    cfg.algo.critic_warmup_learning_rate, cfg.algo.learning_rate = 2e-3, 5e-5
     env = make_env(cfg, num_envs=8)
     runner = make_runner(cfg, env, None)
     alg = runner.alg
+    assert isinstance(alg, CriticWarmupPPO) and runner_cfg(cfg.algo)["algorithm"]["class_name"].endswith("WarmupPPO")
     seen: list[tuple[bool, float, str]] = []
-    update = alg.update
+    update = PPO.update
 
-    def spy() -> dict[str, float]:  # what rsl_rl's update runs with, read as it starts
-        seen.append((alg.use_clipped_value_loss, alg.optimizer.param_groups[0]["lr"], alg.schedule))
-        return update()
+    def spy(self) -> dict[str, float]:  # what rsl_rl's update runs with, read as it starts
+        seen.append((self.use_clipped_value_loss, self.optimizer.param_groups[0]["lr"], self.schedule))
+        return update(self)
 
-    alg.update = spy
-    install_critic_warmup(runner, iterations=2, warmup_rate=2e-3, learning_rate=5e-5)
+    monkeypatch.setattr(PPO, "update", spy)
+    alg.start_at(0)
     runner.learn(3)
     assert seen == [(False, 2e-3, "fixed"), (False, 2e-3, "fixed"), (True, 5e-5, "adaptive")]
+    seen.clear()
+    alg.start_at(2)  # a run resumed at iteration 2: past the warm-up
+    runner.learn(1)
+    assert len(seen) == 1 and seen[0][0] is True and seen[0][2] == "adaptive"
+    cfg.algo.critic_warmup_iterations = 0
+    assert runner_cfg(cfg.algo)["algorithm"]["class_name"] == "PPO"
 
 
 def test_an_actor_unlike_the_student_is_refused_before_any_env_is_built(student, tmp_path):

@@ -15,6 +15,7 @@ import math
 from pathlib import Path
 
 import torch
+from rsl_rl.algorithms import PPO
 from rsl_rl.runners import OnPolicyRunner
 
 from cat.run.config import TrainCfg
@@ -68,52 +69,55 @@ def load_student_as_actor(runner: OnPolicyRunner, ckpt: dict, path: str, noise_s
     )
 
 
-def install_critic_warmup(runner: OnPolicyRunner, iterations: int, warmup_rate: float, learning_rate: float) -> None:
-    """For the run's iterations below ``iterations``, PPO's update trains the critic only, at the fixed
-    ``warmup_rate`` and without value clipping; from then on the actor learns too, from ``learning_rate`` and the
-    configured schedule and clipping.
+class CriticWarmupPPO(PPO):
+    """rsl_rl's PPO whose updates, for the run's iterations below ``critic_warmup_iterations``, train the critic
+    only, at the fixed ``critic_warmup_learning_rate`` and without value clipping; from then on the actor learns
+    too, from the configured learning rate, schedule and clipping. Named by ``cat.run.config.runner_cfg`` through
+    the algorithm's ``class_name`` when ``algo.critic_warmup_iterations`` > 0; ``start_at`` tells it the run's
+    iteration before learning (a resumed run past the warm-up is plain PPO).
 
     Why each: the adaptive schedule reads the actor's KL, ~0 while it is frozen, and would raise the rate to its
     ceiling; PPO's clipped value loss keeps every value within ``clip_param`` of its rollout-time estimate per
     update, a brake that suits a trained critic and leaves a new one hundreds of updates from its targets."""
-    alg = runner.alg
-    start = runner.current_learning_iteration
-    if start >= iterations:
-        return
-    update = alg.update
-    schedule, clipped = alg.schedule, alg.use_clipped_value_loss
-    calls = 0
 
-    def set_rate(lr: float) -> None:
-        alg.learning_rate = lr
-        for group in alg.optimizer.param_groups:
+    def __init__(self, *args, critic_warmup_iterations: int = 0, critic_warmup_learning_rate: float = 1e-3, **kw):
+        super().__init__(*args, **kw)
+        self.warmup_iterations, self.warmup_rate = critic_warmup_iterations, critic_warmup_learning_rate
+        self.configured_rate, self.iteration = self.learning_rate, 0
+
+    def start_at(self, iteration: int) -> None:
+        """The run's iteration at which learning (re)starts."""
+        self.iteration = iteration
+        if iteration < self.warmup_iterations:
+            log.info(
+                "critic warm-up: the actor is frozen for iterations %d-%d (critic rate %g, no value clipping)",
+                iteration,
+                self.warmup_iterations - 1,
+                self.warmup_rate,
+            )
+
+    def _set_rate(self, lr: float) -> None:
+        self.learning_rate = lr
+        for group in self.optimizer.param_groups:
             group["lr"] = lr
 
-    def warm_update() -> dict[str, float]:
-        nonlocal calls
-        warm = start + calls < iterations
-        calls += 1
+    def update(self) -> dict[str, float]:
+        warm = self.iteration < self.warmup_iterations
+        self.iteration += 1
         if not warm:
-            return update()
-        trainable = [p for p in alg.actor.parameters() if p.requires_grad]
+            return super().update()
+        trainable = [p for p in self.actor.parameters() if p.requires_grad]
         for p in trainable:
             p.requires_grad_(False)  # Adam skips parameters without gradients: the actor is untouched
-        alg.schedule, alg.use_clipped_value_loss = "fixed", False
-        set_rate(warmup_rate)
+        schedule, clipped = self.schedule, self.use_clipped_value_loss
+        self.schedule, self.use_clipped_value_loss = "fixed", False
+        self._set_rate(self.warmup_rate)
         try:
-            return update()
+            return super().update()
         finally:
             for p in trainable:
                 p.requires_grad_(True)
-            alg.schedule, alg.use_clipped_value_loss = schedule, clipped
-            if start + calls == iterations:
-                set_rate(learning_rate)
-                log.info("critic warm-up done after %d iterations: the actor learns from now on", iterations)
-
-    alg.update = warm_update
-    log.info(
-        "critic warm-up: the actor is frozen for iterations %d-%d (critic rate %g, no value clipping)",
-        start,
-        iterations - 1,
-        warmup_rate,
-    )
+            self.schedule, self.use_clipped_value_loss = schedule, clipped
+            if self.iteration == self.warmup_iterations:
+                self._set_rate(self.configured_rate)
+                log.info("critic warm-up done after %d iterations: the actor learns from now on", self.iteration)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import logging
 import os
 import shutil
@@ -10,7 +11,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import torch
-from rsl_rl.runners import DistillationRunner, OnPolicyRunner
+from rsl_rl.runners import OnPolicyRunner
 
 import cat
 from cat.checkpoint_io import (  # noqa: F401  (re-exported: the checkpoint API as callers know it)
@@ -34,15 +35,15 @@ from cat.learning.distill import (
     load_student_init,
 )
 from cat.learning.finetune import (
+    CriticWarmupPPO,
     check_actor_matches_student,
-    install_critic_warmup,
     is_student_checkpoint,
     load_student_as_actor,
 )
 from cat.learning.layout_init import init_from_prior
 from cat.learning.precision import check_mixed_precision
-from cat.learning.progress import BudgetReached, install_iteration_hook
 from cat.learning.rerun_writer import prune_metrics
+from cat.learning.runners import BudgetReached, CatDistillationRunner, CatOnPolicyRunner
 from cat.learning.warm_start import adapt_to_new_inputs
 from cat.run.config import ALGOS, TrainCfg, check_obs_groups, runner_cfg, student_model_cfg
 from cat.run.config_file import load_run_config, resume_config, save_config  # noqa: F401  (re-exported)
@@ -191,12 +192,16 @@ def validate_train_cfg(cfg: TrainCfg) -> None:
 
 
 def make_runner(cfg: TrainCfg, env: TraversalEnv, log_dir: str | None) -> OnPolicyRunner:
-    """rsl_rl's PPO runner, or for ``algo=distill`` its ``DistillationRunner`` with the multi-teacher loaded."""
+    """rsl_rl's PPO runner, or for ``algo=distill`` its ``DistillationRunner`` with the multi-teacher loaded, as
+    ``cat.learning.runners`` extends them: checkpoints carry ``_training_state`` and an env snapshot."""
+    state = functools.partial(_training_state, env, cfg)
     if cfg.algo.name == "distill":
-        runner = DistillationRunner(env, distill_runner_cfg(cfg, env.scene_group_names), log_dir, str(env.device))
+        train_cfg = distill_runner_cfg(cfg, env.scene_group_names)
+        runner = CatDistillationRunner(env, train_cfg, log_dir, str(env.device), state=state)
         runner.alg.teacher_loaded = True  # MultiTeacher loaded and checked every specialist on construction
         return runner
-    return OnPolicyRunner(env, runner_cfg(cfg.algo, env.obs_groups), log_dir=log_dir, device=str(env.device))
+    train_cfg = runner_cfg(cfg.algo, env.obs_groups)
+    return CatOnPolicyRunner(env, train_cfg, log_dir=log_dir, device=str(env.device), state=state)
 
 
 def load_into_runner(runner: OnPolicyRunner, path: str, load_cfg: dict | None = None) -> dict | None:
@@ -217,16 +222,6 @@ def _training_state(env: TraversalEnv, cfg: TrainCfg) -> dict:
         "configured_lr": configured_learning_rate(cfg),
         **env.training_state(),
     }
-
-
-def _save_with_state(runner: OnPolicyRunner, env: TraversalEnv, cfg: TrainCfg, save) -> None:
-    """Checkpoints also carry RNG + curriculum (in ``infos``) and an env snapshot file beside them."""
-
-    def save_all(path: str, infos: dict | None = None) -> None:
-        save(path, infos=plain(_training_state(env, cfg)))  # tensors and plain data: the safe loader reads it
-        torch.save(plain(env.get_state()), env_snapshot_path(path))
-
-    runner.save = save_all
 
 
 def configured_learning_rate(cfg: TrainCfg) -> float:
@@ -319,12 +314,9 @@ def _train_in(cfg: TrainCfg, env: TraversalEnv, run_dir: Path) -> Path:
             "nothing to do: the run is at iteration %d of %d", runner.current_learning_iteration, cfg.max_iterations
         )
         return run_dir
-    _save_with_state(runner, env, cfg, runner.save)
-    if cfg.algo.name == "ppo" and cfg.algo.critic_warmup_iterations > 0:
-        install_critic_warmup(
-            runner, cfg.algo.critic_warmup_iterations, cfg.algo.critic_warmup_learning_rate, cfg.algo.learning_rate
-        )
-    install_iteration_hook(runner, cfg.max_iterations, cfg.max_minutes, cfg.verbose)
+    if isinstance(runner.alg, CriticWarmupPPO):
+        runner.alg.start_at(runner.current_learning_iteration)
+    runner.logger.set_budget(cfg.max_iterations, cfg.max_minutes, cfg.verbose)
     try:
         with quiet_constructor(cfg.verbose):  # rsl_rl's "Storing git diff" lines
             runner.learn(remaining, init_at_random_ep_len=not cfg.resume)

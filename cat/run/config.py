@@ -171,6 +171,7 @@ def runner_cfg(algo: AlgoCfg, env_groups: Iterable[str] | None = None) -> dict[s
             "schedule": algo.schedule,
             "symmetry_cfg": _symmetry_cfg(algo),
             "use_mixed_precision": algo.mixed_precision,
+            **_critic_warmup(algo),
         },
         "actor": {
             "class_name": "MLPModel",
@@ -185,6 +186,17 @@ def runner_cfg(algo: AlgoCfg, env_groups: Iterable[str] | None = None) -> dict[s
             "activation": algo.activation,
             "obs_normalization": algo.obs_normalization,
         },
+    }
+
+
+def _critic_warmup(algo: AlgoCfg) -> dict[str, Any]:
+    """A fine-tuned student's critic warm-up: PPO extended by subclass (``cat.learning.finetune``), named here."""
+    if algo.critic_warmup_iterations <= 0:
+        return {}
+    return {
+        "class_name": "cat.learning.finetune:CriticWarmupPPO",
+        "critic_warmup_iterations": algo.critic_warmup_iterations,
+        "critic_warmup_learning_rate": algo.critic_warmup_learning_rate,
     }
 
 

@@ -33,3 +33,29 @@ def test_test_set_is_deterministic_split_and_held_out(tmp_path):
     assert test_scene.meta["source"] != train_scene.meta["source"] or not np.array_equal(
         test_scene.mesh.vertices, train_scene.mesh.vertices
     )
+
+
+def test_starts_are_standing_poses_and_the_first_set_is_still_buildable(tmp_path):
+    """Every start region of the set stands at ``start_stand_radius`` (no furniture within it up to standing
+    height); a crop whose start is next to furniture is refused; ``start_stand_radius=0`` keeps every crop (the
+    first set's rule), so the seeds the new rule skips are exactly those failing the check."""
+    from cat.eval.test_set import start_is_standing
+
+    cfg = UnseenSetCfg(out=str(tmp_path / "s"), num_scenes=4, fields=False)
+    index = build_test_set(cfg, progress=False)
+    for e in index:
+        assert start_is_standing(Scene.load(tmp_path / "s" / e["folder"]), cfg.stand_height, cfg.start_stand_radius)
+    kept = {e["seed"] for e in index}
+    first = {s for s in range(max(kept) + 1) if candidate(s, 4) is not None}
+    skipped = first - kept
+    for s in skipped:
+        assert not start_is_standing(candidate(s, 4), cfg.stand_height, cfg.start_stand_radius)
+    for s in kept:
+        assert candidate(s, 4, 0.0) is not None
+    scene = candidate(min(kept), 4)
+    wall = scene.start_region[1, 0] + 0.05  # a wall 5 cm beyond the start region's edge
+    from cat.terrain.primitives import box, combine
+
+    scene.mesh = combine([scene.mesh, box((wall, -2.0, 0.0), (wall + 0.1, 2.0, 1.5))])
+    scene._occ.clear()
+    assert not start_is_standing(scene, cfg.stand_height, cfg.start_stand_radius)

@@ -29,7 +29,7 @@ from scipy import ndimage
 from skimage.graph import MCP_Geometric
 
 from cat.terrain import Scene
-from cat.terrain.voxel import ReachCfg, erode_xy, walkable
+from cat.terrain.voxel import ReachCfg, standing_mask, walkable
 
 log = logging.getLogger(__name__)
 
@@ -74,13 +74,6 @@ class SceneStarts:
     @property
     def goals_served(self) -> np.ndarray:
         return np.array([len(p) > 0 for p in self.points], dtype=bool)
-
-
-def standing_mask(occ: np.ndarray, voxel: float, height: float, radius: float) -> np.ndarray:
-    """(nx, ny) columns free from the floor to ``height`` with ``radius`` of free columns around them."""
-    need = min(int(np.ceil(height / voxel - 1e-6)), occ.shape[2])
-    free_col = ~occ[:, :, :need].any(axis=2)
-    return erode_xy(free_col, radius, voxel) if radius > 0 else free_col
 
 
 def geodesic_to(walk: np.ndarray, goal_ij: tuple[int, int], voxel: float) -> np.ndarray:

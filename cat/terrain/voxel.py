@@ -259,3 +259,11 @@ def erode_xy(mask: np.ndarray, radius: float, voxel: float) -> np.ndarray:
     n = int(np.ceil(r))
     yy, xx = np.mgrid[-n : n + 1, -n : n + 1]
     return ndimage.binary_erosion(mask, structure=(xx**2 + yy**2) <= r**2 + 1e-9, border_value=0)
+
+
+def standing_mask(occ: np.ndarray, voxel: float, height: float, radius: float) -> np.ndarray:
+    """(nx, ny) columns free from the floor to ``height`` with ``radius`` of free columns around them: where a
+    humanoid stands upright, arms out (training starts, ``cat.envs.episodes``; test-set starts, ``cat.eval``)."""
+    need = min(int(np.ceil(height / voxel - 1e-6)), occ.shape[2])
+    free_col = ~occ[:, :, :need].any(axis=2)
+    return erode_xy(free_col, radius, voxel) if radius > 0 else free_col

@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from cat.envs.episodes import EpisodeCfg
 from cat.terrain import Scene, SceneError, make_indoor
 from cat.terrain.dataset import DONE_FILE, build_fields
 from cat.terrain.voxel import standing_mask
@@ -60,7 +61,7 @@ class UnseenSetCfg:
     # the start region must be standing columns: free up to stand_height within this radius [m] (module docstring);
     # 0: only the paper's 0.1 m floor erosion (the first test set, 24 % of its trials starting in contact)
     start_stand_radius: float = 0.24
-    stand_height: float = 1.35  # [m], EpisodeCfg.stand_height
+    stand_height: float = EpisodeCfg.stand_height  # [m], the training starts' standing height
 
 
 def start_is_standing(scene: Scene, height: float, radius: float) -> bool:
@@ -68,13 +69,14 @@ def start_is_standing(scene: Scene, height: float, radius: float) -> bool:
     grid = scene.grid()
     stand = standing_mask(scene.occupancy(), grid.voxel, height, radius)
     (x0, y0), (x1, y1) = scene.start_region
-    i = np.flatnonzero((grid.axes()[0] >= x0 - 1e-9) & (grid.axes()[0] <= x1 + 1e-9))
-    j = np.flatnonzero((grid.axes()[1] >= y0 - 1e-9) & (grid.axes()[1] <= y1 + 1e-9))
+    x, y, _ = grid.axes()
+    i = np.flatnonzero((x >= x0 - 1e-9) & (x <= x1 + 1e-9))
+    j = np.flatnonzero((y >= y0 - 1e-9) & (y <= y1 + 1e-9))
     return bool(len(i) and len(j) and stand[np.ix_(i, j)].all())
 
 
 def candidate(
-    seed: int, goals_per_scene: int, start_stand_radius: float = 0.0, stand_height: float = 1.35
+    seed: int, goals_per_scene: int, start_stand_radius: float = 0.0, stand_height: float = EpisodeCfg.stand_height
 ) -> Scene | None:
     """The test-stream indoor crop of ``seed`` with at most ``goals_per_scene`` goals (None: no valid crop, or with
     ``start_stand_radius`` > 0 a start region that is not all standing columns)."""

@@ -62,11 +62,13 @@ class Storage:
         [64, 127] (a relative error of at most 1/128 of the largest component), m = e = 0 where F is 0."""
         if not self.shared_exponent:
             return force
-        f = torch.nan_to_num(force.to(torch.float64), nan=0.0, posinf=0.0, neginf=0.0)
+        f = torch.nan_to_num(force.to(torch.float32), nan=0.0, posinf=0.0, neginf=0.0)
         peak = f.abs().amax(-1, keepdim=True)
-        e = torch.where(peak > 0, torch.ceil(torch.log2(peak.clamp(min=1e-300) / 127.0)), 0.0).clamp(-126, 127)
-        m = torch.round(f / torch.exp2(e)).clamp(-127, 127)
-        return torch.cat([m, e], -1).to(torch.int8)
+        _, e = torch.frexp(peak)  # peak = p · 2^e, p in [0.5, 1)
+        e = torch.where(peak > 0, e - 7, 0).clamp(-126, 127)  # peak / 2^(e-7) in [64, 128); F = 0: m = e = 0
+        inv_scale = ((127 - e) << 23).view(torch.float32)  # 2^-e exactly, from its float32 bits
+        m = (f * inv_scale).round_().clamp_(-127, 127)
+        return torch.cat([m, e.to(m.dtype)], -1).to(torch.int8)
 
 
 STORAGES = {

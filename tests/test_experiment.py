@@ -255,3 +255,23 @@ def test_a_spent_sitting_leaves_the_rest_for_the_next(tmp_path, caplog, monkeypa
     assert code == 0 and not errors
     assert "ran nothing; left prior@0, spec@0" in _summary(caplog)
     assert not (tmp_path / "exps/exp/runs").exists()
+
+
+def test_a_key_added_at_its_old_behaviour_keeps_the_run_hashes(tmp_path):
+    """sim.field_storage came after runs were hashed: at float32 (what they did) it is left out of the hash, so
+    unfinished runs still resume; another value is another run."""
+    from cat.experiment.plan import Plan, _comparable
+    from cat.experiment.spec import load_experiment
+    from cat.learning.hydra_cfg import load_config
+
+    assert "field_storage" not in _comparable(load_config([]))["sim"]
+    assert _comparable(load_config(["sim.field_storage=compact"]))["sim"]["field_storage"] == "compact"
+    hashes = []
+    for storage in ("float32", "compact"):
+        cells = {
+            "prior": {"task": "flat", "iterations": 2},
+            "same": {"task": "flat", "iterations": 2, "overrides": [f"sim.field_storage={storage}"]},
+        }
+        plan = Plan(load_experiment(_write(tmp_path, cells)), str(tmp_path / "exps"))
+        hashes.append((plan.units["prior@0"].hash, plan.units["same@0"].hash))
+    assert hashes[0][0] == hashes[0][1] == hashes[1][0] != hashes[1][1]

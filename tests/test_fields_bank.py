@@ -88,11 +88,37 @@ def test_fp16_bank_close_to_fp32(scenes):
     _check_against_reference(bank, scenes, rtol=2.0**-11, fp16=True)  # half precision: 2^-11 of a stored value
 
 
+def test_compact_bank_close_to_fp32(scenes):
+    """compact: d, ∇d in float16, F as int8 mantissas with a shared exponent, within 1/128 of the largest
+    stored component (half a step of a mantissa whose peak is in [64, 127]) after interpolation."""
+    bank = FieldBank.from_scenes(scenes, dtype="compact")
+    assert bank.scene_data.dtype == torch.float16 and bank.goal_data.dtype == torch.int8
+    _check_against_reference(bank, scenes, rtol=2.0**-7, fp16=True)
+
+
+def test_compact_storage_bytes_and_encoding():
+    layouts = [SceneLayout(g, n) for g, n in zip(GRIDS, GOALS, strict=True)]
+    vox = [g.num_voxels for g in GRIDS]
+    bank = FieldBank(layouts, dtype="compact")
+    assert bank.goal_data.numel() == 4 * sum(v * n for v, n in zip(vox, GOALS, strict=True))  # 3 mantissas + exponent
+    assert (
+        bank.nbytes == bank_bytes(layouts, "compact") == sum(v * (8 + 4 * n) for v, n in zip(vox, GOALS, strict=True))
+    )
+    enc = bank.storage.encode_force(torch.tensor([[0.0, 0.0, 0.0], [3.0e4, -1.0, 0.0], [1e-6, 2e-6, -4e-6]]))
+    assert enc[0].tolist() == [0, 0, 0, 0]  # F = 0 (the goal itself) stays 0
+    for row, f in zip(enc[1:], ([3.0e4, -1.0, 0.0], [1e-6, 2e-6, -4e-6]), strict=True):
+        m, e = row[:3].double(), float(row[3])
+        assert 64 <= m.abs().max() <= 127
+        np.testing.assert_allclose((m * 2.0**e).numpy(), f, atol=max(abs(x) for x in f) / 128)
+    fp16_file = torch.tensor([[6.0e4, 6.0e4, 6.0e4]], dtype=torch.float16)  # |F|^2 overflows float16
+    assert torch.isfinite(bank.storage.encode_force(fp16_file).float()).all()
+
+
 def test_offsets_past_2_31_address_the_right_field(scenes):
     """Move the buffers' base pointers 2^32 + 7 elements down and every offset as far up: the same memory,
     reached through offsets an int32 index would wrap. The query must not change (a wrapped or truncated
     offset reads another field or faults)."""
-    for dtype in ("float32", "float16"):
+    for dtype in ("float32", "float16", "compact"):
         bank = FieldBank.from_scenes(scenes, dtype=dtype)
         rng = np.random.default_rng(2)
         idx = torch.as_tensor(rng.integers(0, bank.num_fields, 64), dtype=torch.int32)

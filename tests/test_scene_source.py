@@ -58,6 +58,21 @@ def test_typical_training_scenes_with_warmups_and_mirrors():
     assert ss.episode_cfg == task.episodes
 
 
+def test_the_run_chooses_the_bank_storage(tmp_path):
+    """sim.field_storage reaches the training bank (a typical set and a folder); a bad value is one clear error."""
+    from cat.learning.hydra_cfg import load_config
+
+    task = _task(scene_kind="crouch_pass", scene_variants=1)
+    assert scene_set_for(task, 2).bank.storage.goal.itemsize == 4  # default: float32, what every run used
+    ss = scene_set_for(task, 2, storage="compact")
+    assert ss.bank.dtype_name == "compact" and ss.bank.goal_data.dtype.itemsize == 1
+    _save(tmp_path / "indoor" / "a", "indoor", 0.2)
+    assert scene_set_for(_task(scene_dir=str(tmp_path)), 2, storage="float16").bank.dtype_name == "float16"
+    assert load_config(["sim.field_storage=compact"]).sim.field_storage == "compact"
+    with pytest.raises(Exception, match="sim.field_storage='int4'; valid: float32, float16, compact"):
+        load_config(["sim.field_storage=int4"])
+
+
 def test_scene_groups_win_over_scene_kind():
     task = _task(scene_kind="side-pass", scene_groups=["crouch_pass", "side-pass"], scene_variants=2)
     src = scene_source(task)

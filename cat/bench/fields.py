@@ -109,6 +109,7 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--envs", type=int, default=4096)
     p.add_argument("--fields", type=int, default=8, help="fields in the query bank")
     p.add_argument("--device", default="cpu", help="cpu or cuda[:i]: where fields are built and queried")
+    p.add_argument("--precision", action="store_true", help="also case=bank_precision (float16, compact vs float32)")
     args = p.parse_args(argv)
     import warp as wp
 
@@ -119,19 +120,33 @@ def main(argv: list[str] | None = None) -> None:
     bench_build("window", cluttered_window(), WINDOW_GRID, (0.0, 0.0, 0.75), args.repeat, dev)
     bench_query(args.envs, 13, args.fields, args.repeat * 5, device=dev)
     bench_query(args.envs, 13, 1, args.repeat * 5, name="query_1field", device=dev)
+    if args.precision:
+        precision_case()
 
 
-if __name__ == "__main__":
-    main()
+def precision_case(goals: int = 3) -> None:
+    """``case=bank_precision``: float16 and compact storage against float32 on a typical, a procedural and an
+    indoor scene with ``goals`` goals each (docs/fields.md)."""
+    from cat.bench.scale import _with_goals
+    from cat.envs.scene_set import scene_fields
+    from cat.terrain import make_indoor, make_procedural, make_typical
+
+    scenes = [make_typical("hurdle-crouch", 0.5, 0), make_procedural(0.6, 1), make_indoor(2)]
+    fields = [scene_fields(_with_goals(s, goals), None, None) for s in scenes]
+    for dtype in ("float16", "compact"):
+        r = bank_precision(fields, dtype=dtype)
+        print(f"case=bank_precision dtype={dtype} " + " ".join(f"{k}={v:.3g}" for k, v in r.items()), flush=True)
 
 
-def bank_precision(scenes: list, points_per_field: int = 20000, seed: int = 0) -> dict[str, float]:
-    """Error of a float16 bank against the float32 bank of the same ``SceneFields`` at random points in
-    each field's grid: |Δd| and |Δ∇d| (m, unitless), the angle between F directions (degrees, where
-    |F| > 1e-3) and |Δ|F||/|F|. Returns max and 99th percentile of each."""
+def bank_precision(
+    scenes: list, points_per_field: int = 20000, seed: int = 0, dtype: str = "float16"
+) -> dict[str, float]:
+    """Error of a ``dtype`` bank (float16 or compact) against the float32 bank of the same ``SceneFields`` at
+    random points in each field's grid: |Δd| and |Δ∇d| (m, unitless), the angle between F directions (degrees,
+    where |F| > 1e-3) and |Δ|F||/|F|. Returns max and 99th percentile of each."""
     rng = np.random.default_rng(seed)
     b32 = FieldBank.from_scenes(scenes, dtype="float32")
-    b16 = FieldBank.from_scenes(scenes, dtype="float16")
+    b16 = FieldBank.from_scenes(scenes, dtype=dtype)
     idx = torch.arange(b32.num_fields, dtype=torch.int32).repeat_interleave(points_per_field // 100)
     lo, hi = b32.field_bounds(idx)
     pts = lo[:, None] + torch.as_tensor(rng.uniform(0, 1, (len(idx), 100, 3)), dtype=torch.float32) * (hi - lo)[:, None]
@@ -149,3 +164,7 @@ def bank_precision(scenes: list, points_per_field: int = 20000, seed: int = 0) -
         out[f"{name}_max"] = float(v.max())
         out[f"{name}_p99"] = float(torch.quantile(v.double()[: 1 << 24], 0.99))
     return out
+
+
+if __name__ == "__main__":
+    main()

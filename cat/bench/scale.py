@@ -39,6 +39,7 @@ from cat.envs.scene_models import WorldModels
 from cat.envs.scene_set import SceneSet
 from cat.envs.traversal_env import TraversalEnv
 from cat.fields import FieldBank, FieldCfg, Grid, SceneFields, SceneLayout, StaleFieldError, bank_bytes, build_fields
+from cat.fields.bank import STORAGES
 from cat.fields.store import STORE_FILE
 from cat.terrain import Scene, make_indoor, make_procedural, make_typical
 
@@ -116,7 +117,9 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--typical", type=int, default=80)
     p.add_argument("--procedural", type=int, default=167)
     p.add_argument("--indoor", type=int, default=108)
-    p.add_argument("--dtype", default="float16", choices=["float16", "float32"])
+    p.add_argument(
+        "--dtype", default="float16", choices=list(STORAGES), help="bank storage (files: float16 for compact)"
+    )
     p.add_argument("--data", default="/tmp/cat_scale_bench", help="where the unique scenes are cached")
     p.add_argument("--envs", type=int, default=1024, help="envs for the env steps/s comparison")
     p.add_argument("--query-envs", type=int, default=4096)
@@ -140,7 +143,7 @@ def main(argv: list[str] | None = None) -> None:
     if args.device != "cpu" and args.sim == "mujoco" and not (args.no_env and args.physics_scenes == 0):
         raise SystemExit(f"--device {args.device}: MuJoCo C envs run on the CPU; add --sim warp (or --no-env)")
 
-    unique = unique_scenes(Path(args.data), args.dtype)
+    unique = unique_scenes(Path(args.data), "float32" if args.dtype == "float32" else "float16")
     torch.set_num_threads(1)
     if args.physics_scenes > 0:
         physics_case(unique, args)
@@ -156,10 +159,11 @@ def scale_case(unique: dict[str, list[Path]], args: argparse.Namespace) -> None:
     for f in folders:
         g = scenes_u[f].grid()
         layouts.append(SceneLayout(Grid(g.origin, g.voxel, g.shape), len(scenes_u[f].goals)))
-    mb = {d: bank_bytes(layouts, d) / 2**20 for d in ("float16", "float32")}
+    mb = {d: bank_bytes(layouts, d) / 2**20 for d in STORAGES}
     print(
         f"case=scale_memory scenes={len(folders)} goals={GOALS} fp16_mb={mb['float16']:.0f} fp32_mb={mb['float32']:.0f}"
-        f" fits_24gib_fp16={mb['float16'] < 24 * 1024} fits_24gib_fp32={mb['float32'] < 24 * 1024}",
+        f" compact_mb={mb['compact']:.0f} fits_24gib_fp16={mb['float16'] < 24 * 1024}"
+        f" fits_24gib_fp32={mb['float32'] < 24 * 1024} fits_12gib_compact={mb['compact'] < 12 * 1024}",
         flush=True,
     )
     limit = args.mem_limit_gb if args.mem_limit_gb is not None else _mem_available_gb() - 4.0

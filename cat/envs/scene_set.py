@@ -189,6 +189,7 @@ class SceneSet:
         warmup: int = 0,
         mirror: bool = False,
         episodes: EpisodeCfg | None = None,
+        dtype: str = "float32",
     ) -> SceneSet:
         """The paper's typical scenes of ``kind`` (or of each of several kinds: one scene group per kind)
         built on the fly (no dataset needed), plus ``warmup`` training-only easier scenes per kind, and with
@@ -197,7 +198,7 @@ class SceneSet:
         scenes = [s for k in kinds for s in warmup_variants(k, warmup, seed) + typical_variants(k, variants, seed)]
         scenes = with_mirrors(scenes) if mirror else scenes
         load = lambda i: scene_fields(scenes[i], None, field_cfg)  # noqa: E731
-        return cls(scenes, load, num_envs, device, per_world=per_world, episodes=episodes)
+        return cls(scenes, load, num_envs, device, dtype=dtype, per_world=per_world, episodes=episodes)
 
     # --- env hooks ----------------------------------------------------------------------------------------
     def add_to_spec(self, spec: mujoco.MjSpec) -> None:

@@ -40,9 +40,12 @@ class SceneSource:
     mirror: bool = False  # each scene followed by its left/right mirror image
     episodes: EpisodeCfg | None = None  # start / goal sampling (None: the scenes' start regions)
 
-    def scene_set(self, num_envs: int, device: str = "cpu", per_world: bool = False) -> SceneSet:
-        """The training ``SceneSet`` of these scenes (``per_world``: one scene per physics world)."""
-        kw = dict(device=device, per_world=per_world, mirror=self.mirror, episodes=self.episodes)
+    def scene_set(
+        self, num_envs: int, device: str = "cpu", per_world: bool = False, storage: str = "float32"
+    ) -> SceneSet:
+        """The training ``SceneSet`` of these scenes (``per_world``: one scene per physics world; ``storage``:
+        the field bank's, ``cat.fields.bank.STORAGES``)."""
+        kw = dict(device=device, per_world=per_world, mirror=self.mirror, episodes=self.episodes, dtype=storage)
         if self.scene_dir:
             return SceneSet.from_dir(self.scene_dir, num_envs=num_envs, kind=self.kind, data=self.data, **kw)
         return SceneSet.typical(list(self.typical), num_envs, self.variants, self.seed, warmup=self.warmup, **kw)
@@ -102,10 +105,12 @@ def scene_source(task: EnvCfg) -> SceneSource | None:
     )
 
 
-def scene_set_for(task: EnvCfg, num_envs: int, device: str = "cpu", per_world: bool = False) -> SceneSet | None:
+def scene_set_for(
+    task: EnvCfg, num_envs: int, device: str = "cpu", per_world: bool = False, storage: str = "float32"
+) -> SceneSet | None:
     """The training scene set of ``task`` (``None``: flat ground): ``scene_source(task).scene_set(...)``."""
     source = scene_source(task)
-    return None if source is None else source.scene_set(num_envs, device, per_world)
+    return None if source is None else source.scene_set(num_envs, device, per_world, storage)
 
 
 def eval_scene_source(

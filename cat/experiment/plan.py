@@ -25,6 +25,9 @@ from cat.learning.hydra_cfg import load_config
 # keys that do not change what a run learns (or are the budget, handled apart)
 VOLATILE = ("run_dir", "run_root", "run_name", "max_minutes", "max_iterations", "verbose", "torch_threads")
 VOLATILE += ("init", "resume", "teachers")
+NEUTRAL_DEFAULTS = {("sim", "field_storage"): "float32"}
+"""Keys added after runs were hashed, with the value that reproduces what those runs did: left out of the hash at
+that value, so adding the key does not make every unfinished run "changed" (a key added at its old behaviour)."""
 STATE_FILE = "state.json"
 
 
@@ -43,6 +46,9 @@ def _comparable(cfg) -> dict:
     out = OmegaConf.to_container(OmegaConf.structured(cfg))
     for key in VOLATILE:
         out.pop(key, None)
+    for (group, key), neutral in NEUTRAL_DEFAULTS.items():
+        if out.get(group, {}).get(key, neutral) == neutral:
+            out.get(group, {}).pop(key, None)
     return out
 
 

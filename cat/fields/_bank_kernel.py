@@ -1,13 +1,13 @@
 # ruff: noqa: UP018  (Warp kernels need int(0)/float(0.0) to declare mutable locals)
 """Warp kernel of the field-bank query: trilinear d, ∇d (stored once per scene) and F (stored per goal).
 
+F is stored as float32 / float16 like d, or (the ``compact`` storage) as int8 mantissas with a shared exponent.
+
 Storage is two flat buffers. A scene's block (``vec4``: d, ∇d) and a field's block (``vec3``: F) are found
 from the buffer's 64-bit base address plus an int64 element offset (:func:`block_address`); inside a block
 the index is at most one grid's voxel count. No index therefore wraps however many voxels the bank holds
 (a single flat int32 index wraps past 2^31 voxels, ≈ 3,400 fields of 125×125×40).
 """
-
-from __future__ import annotations
 
 import functools
 
@@ -33,12 +33,24 @@ def block_address_kernel(
 
 
 @functools.cache
-def query_kernel(scalar: type) -> wp.Kernel:
-    """The bank query for storage scalar type ``scalar`` (``wp.float32`` or ``wp.float16``); math in float32."""
+def query_kernel(scalar: type, goal_scalar: type | None = None) -> wp.Kernel:
+    """The bank query for storage scalar type ``scalar`` (``wp.float32`` or ``wp.float16``) and, with
+    ``goal_scalar=wp.int8``, F stored as 3 int8 mantissas and a shared int8 power-of-two exponent (the ``compact``
+    storage, ``cat.fields.bank.Storage``); math in float32."""
+    shared_exponent = goal_scalar == wp.int8
     v4 = wp.types.vector(length=4, dtype=scalar)
-    v3 = wp.types.vector(length=3, dtype=scalar)
+    v3 = wp.types.vector(length=4, dtype=wp.int8) if shared_exponent else wp.types.vector(length=3, dtype=scalar)
     scene_bytes = wp.types.type_size_in_bytes(v4)
     goal_bytes = wp.types.type_size_in_bytes(v3)
+
+    @wp.func
+    def load_f(fd: wp.array(dtype=v3), i: int) -> wp.vec3:
+        """F of voxel ``i`` in float32."""
+        if wp.static(shared_exponent):
+            q = fd[i]
+            return wp.vec3(float(q[0]), float(q[1]), float(q[2])) * wp.pow(2.0, float(q[3]))
+        else:
+            return wp.vec3(fd[i])
 
     @wp.kernel(module="unique")
     def query(
@@ -104,10 +116,10 @@ def query_kernel(scalar: type) -> wp.Kernel:
         s10 = gz * wp.vec4(sd[b + o1]) + fz * wp.vec4(sd[b + o1 + o3])
         s11 = gz * wp.vec4(sd[b + o1 + o2]) + fz * wp.vec4(sd[b + o1 + o2 + o3])
         sv = gx * (gy * s00 + fy * s01) + fx * (gy * s10 + fy * s11)
-        f00 = gz * wp.vec3(fd[b]) + fz * wp.vec3(fd[b + o3])
-        f01 = gz * wp.vec3(fd[b + o2]) + fz * wp.vec3(fd[b + o2 + o3])
-        f10 = gz * wp.vec3(fd[b + o1]) + fz * wp.vec3(fd[b + o1 + o3])
-        f11 = gz * wp.vec3(fd[b + o1 + o2]) + fz * wp.vec3(fd[b + o1 + o2 + o3])
+        f00 = gz * load_f(fd, b) + fz * load_f(fd, b + o3)
+        f01 = gz * load_f(fd, b + o2) + fz * load_f(fd, b + o2 + o3)
+        f10 = gz * load_f(fd, b + o1) + fz * load_f(fd, b + o1 + o3)
+        f11 = gz * load_f(fd, b + o1 + o2) + fz * load_f(fd, b + o1 + o2 + o3)
         fv = gx * (gy * f00 + fy * f01) + fx * (gy * f10 + fy * f11)
         out[t] = vec7(fv[0], fv[1], fv[2], sv[0], sv[1], sv[2], sv[3])
 

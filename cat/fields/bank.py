@@ -3,8 +3,10 @@
 Scenes may have different grid shapes (typical 75×50×38, procedural 125×125×40, indoor 125×125×50) and
 origins. What the env reads is stored once where it can be: d and ∇d per *scene* (``SCENE_CHANNELS``), F
 per *field* = (scene, goal) (``GOAL_CHANNELS``); the geodesic and U are not stored (nothing reads them).
-Storage is float32 or float16 (half the memory; the accuracy loss is measured in docs/fields.md), two flat
-buffers addressed with 64-bit offsets (see :mod:`cat.fields._bank_kernel`).
+Storage (:data:`STORAGES`) is float32, float16 (half the memory), or ``compact``: d, ∇d in float16 and F as three
+int8 mantissas with a shared int8 power-of-two exponent (56 instead of 80 bytes per voxel with 12 goals); the
+accuracy of each is measured in docs/fields.md. Two flat buffers addressed with 64-bit offsets
+(see :mod:`cat.fields._bank_kernel`).
 
 A bank is allocated from its layout (grid and goal count per scene) and filled scene by scene, so building
 it never holds more than one scene's arrays on the host besides the bank itself.
@@ -38,7 +40,44 @@ SCENE_CHANNELS = ("sdf", "gx", "gy", "gz")
 GOAL_CHANNELS = ("fx", "fy", "fz")
 QUERY_CHANNELS = ("fx", "fy", "fz", "sdf", "gx", "gy", "gz")
 """Channels of :attr:`FieldSample.values`."""
-DTYPES = {"float32": (torch.float32, wp.float32), "float16": (torch.float16, wp.float16)}
+
+
+@dataclass(frozen=True)
+class Storage:
+    """How a bank stores its channels: d, ∇d per scene (``scene``), F per goal (``goal``)."""
+
+    scene: torch.dtype
+    scene_wp: type
+    goal: torch.dtype
+    goal_wp: type
+    shared_exponent: bool = False  # F as 3 int8 mantissas and one int8 power-of-two exponent per voxel
+
+    @property
+    def goal_channels(self) -> int:
+        """Stored numbers per voxel and goal (F, plus its exponent when shared)."""
+        return len(GOAL_CHANNELS) + int(self.shared_exponent)
+
+    def encode_force(self, force: torch.Tensor) -> torch.Tensor:
+        """F (..., 3) as stored: floats cast on copy; shared exponent: F = m · 2^e with the largest |m| in
+        [64, 127] (a relative error of at most 1/128 of the largest component), m = e = 0 where F is 0."""
+        if not self.shared_exponent:
+            return force
+        f = torch.nan_to_num(force.to(torch.float32), nan=0.0, posinf=0.0, neginf=0.0)
+        peak = f.abs().amax(-1, keepdim=True)
+        _, e = torch.frexp(peak)  # peak = p · 2^e, p in [0.5, 1)
+        e = torch.where(peak > 0, e - 7, 0).clamp(-126, 127)  # peak / 2^(e-7) in [64, 128); F = 0: m = e = 0
+        inv_scale = ((127 - e) << 23).view(torch.float32)  # 2^-e exactly, from its float32 bits
+        m = (f * inv_scale).round_().clamp_(-127, 127)
+        return torch.cat([m, e.to(m.dtype)], -1).to(torch.int8)
+
+
+STORAGES = {
+    "float32": Storage(torch.float32, wp.float32, torch.float32, wp.float32),
+    "float16": Storage(torch.float16, wp.float16, torch.float16, wp.float16),
+    "compact": Storage(torch.float16, wp.float16, torch.int8, wp.int8, shared_exponent=True),
+}
+"""Bank storage by name (``FieldBank(dtype=...)``, the run's ``sim.field_storage``)."""
+DTYPES = tuple(STORAGES)
 
 
 @dataclass(frozen=True)
@@ -73,11 +112,9 @@ class FieldSample:
 
 def bank_bytes(layouts: Sequence[SceneLayout], dtype: str = "float32") -> int:
     """Storage a bank of ``layouts`` needs (bytes), without allocating it."""
-    item = torch.tensor([], dtype=_dtype(dtype)[0]).element_size()
-    vox = [lay.grid.num_voxels for lay in layouts]
-    return item * sum(
-        n * (len(SCENE_CHANNELS) + len(GOAL_CHANNELS) * lay.num_goals) for n, lay in zip(vox, layouts, strict=True)
-    )
+    st = _storage(dtype)
+    scene_b, goal_b = st.scene.itemsize * len(SCENE_CHANNELS), st.goal.itemsize * st.goal_channels
+    return sum(lay.grid.num_voxels * (scene_b + goal_b * lay.num_goals) for lay in layouts)
 
 
 def advise_huge_pages(t: torch.Tensor) -> bool:
@@ -100,10 +137,10 @@ _HUGE = 1 << 21
 _MADV_HUGEPAGE = 14
 
 
-def _dtype(name: str) -> tuple[torch.dtype, type]:
-    if name not in DTYPES:
-        raise ValueError(f"bank dtype must be one of {sorted(DTYPES)}, got {name!r}")
-    return DTYPES[name]
+def _storage(name: str) -> Storage:
+    if name not in STORAGES:
+        raise ValueError(f"bank dtype (storage) must be one of {', '.join(STORAGES)}, got {name!r}")
+    return STORAGES[name]
 
 
 class FieldBank:
@@ -126,7 +163,8 @@ class FieldBank:
             if lay.num_goals < 1:
                 raise ValueError(f"every scene needs at least one goal field, got {lay.num_goals}")
         self.dtype_name = dtype
-        self.dtype, self._wp_scalar = _dtype(dtype)
+        self.storage = _storage(dtype)
+        self.dtype, self._wp_scalar = self.storage.scene, self.storage.scene_wp
         self.device = torch.device(device)
         self.layouts = list(layouts)
         vox = np.array([lay.grid.num_voxels for lay in layouts], dtype=np.int64)
@@ -138,7 +176,9 @@ class FieldBank:
         field_offset = np.concatenate(([0], np.cumsum(field_vox)[:-1]))
         dev, i64 = self.device, torch.int64
         self.scene_data = torch.empty(int(vox.sum()) * len(SCENE_CHANNELS), dtype=self.dtype, device=dev)
-        self.goal_data = torch.empty(int(field_vox.sum()) * len(GOAL_CHANNELS), dtype=self.dtype, device=dev)
+        self.goal_data = torch.empty(
+            int(field_vox.sum()) * self.storage.goal_channels, dtype=self.storage.goal, device=dev
+        )
         if dev.type == "cpu":  # before the first write: pages are allocated on touch
             advise_huge_pages(self.scene_data)
             advise_huge_pages(self.goal_data)
@@ -199,7 +239,7 @@ class FieldBank:
 
     def _field_view(self, i: int) -> torch.Tensor:
         grid = self.layouts[int(self.field_scene[i])].grid
-        c = len(GOAL_CHANNELS)
+        c = self.storage.goal_channels
         o = int(self.field_offset[i]) * c
         return self.goal_data[o : o + grid.num_voxels * c].view(*grid.shape, c)
 
@@ -214,7 +254,7 @@ class FieldBank:
         off = np.asarray(offset, dtype=np.float64).reshape(3)
         self._scene_view(s).copy_(torch.from_numpy(sf.sdf_grad))
         for g, i in enumerate(self.fields_of(s)):
-            self._field_view(i).copy_(torch.from_numpy(sf.force[g]))
+            self._field_view(i).copy_(self.storage.encode_force(torch.from_numpy(sf.force[g])))
         fs = self.fields_of(s)
         self.goals[fs.start : fs.stop] = torch.as_tensor(sf.goals + off, dtype=torch.float32, device=self.device)
         self.scene_origin[s] = torch.as_tensor(np.asarray(sf.grid.origin) + off, dtype=torch.float32)
@@ -227,7 +267,7 @@ class FieldBank:
         s = int(self.field_scene[i])
         if f.grid.shape != self.layouts[s].grid.shape:
             raise ValueError(f"field grid {f.grid.shape} does not match scene {s}'s {self.layouts[s].grid.shape}")
-        self._field_view(i).copy_(torch.from_numpy(np.ascontiguousarray(f.force)))
+        self._field_view(i).copy_(self.storage.encode_force(torch.from_numpy(np.ascontiguousarray(f.force))))
         self.goals[i] = torch.as_tensor(np.asarray(f.goal) + np.asarray(offset), dtype=torch.float32)
 
     @classmethod
@@ -281,7 +321,7 @@ class FieldBank:
     def _pointers(self) -> tuple[int, int, list]:
         shift = self._ptr_shift
         scene = (self.scene_data.data_ptr() - shift * self.scene_data.element_size() * len(SCENE_CHANNELS)) % 2**64
-        goal = (self.goal_data.data_ptr() - shift * self.goal_data.element_size() * len(GOAL_CHANNELS)) % 2**64
+        goal = (self.goal_data.data_ptr() - shift * self.goal_data.element_size() * self.storage.goal_channels) % 2**64
         return scene, goal, self._meta
 
     def _check_ready(self) -> None:
@@ -310,7 +350,8 @@ class FieldBank:
                 torch.empty((n, k, len(QUERY_CHANNELS)), dtype=torch.float32, device=self.device),
                 torch.empty((n, k), dtype=torch.bool, device=self.device),
             )
-        kernel = query_kernel(self._wp_scalar)
+        st = self.storage
+        kernel = query_kernel(st.scene_wp, st.goal_wp if st.shared_exponent else None)
         scene_ptr, goal_ptr, meta = self._pointers()
         values = out.values.view(-1, len(QUERY_CHANNELS))
         inside = out.inside.view(-1)
@@ -421,4 +462,4 @@ class FieldBank:
         return s, humanoid_pf(s.force, s.grad_sdf, s.sdf, velocities.to(s.values), w0, cfg.lam)
 
 
-__all__ = ["FieldBank", "FieldSample", "QUERY_CHANNELS", "SceneLayout", "bank_bytes"]
+__all__ = ["FieldBank", "FieldSample", "QUERY_CHANNELS", "STORAGES", "SceneLayout", "Storage", "bank_bytes"]

@@ -84,8 +84,9 @@ def make_env(cfg: TrainCfg, num_envs: int | None = None) -> TraversalEnv:
     """The env of a run config (``num_envs`` overrides both the task's and the run's)."""
     n = num_envs or cfg.num_envs or cfg.task.num_envs
     task = replace(cfg.task, num_envs=n)
-    scenes = scene_set_for(task, n, cfg.sim.device, cfg.sim.per_world_scenes)  # cat.envs.scene_source
-    sim, fc = cfg.sim, cfg.sim.field_contact
+    sim = cfg.sim
+    scenes = scene_set_for(task, n, sim.device, sim.per_world_scenes, sim.field_storage)  # cat.envs.scene_source
+    fc = sim.field_contact
     return TraversalEnv(
         task, sim.backend, sim.device, scenes=scenes, seed=cfg.seed, obstacles=sim.obstacles, field_contact=fc
     )

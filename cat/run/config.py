@@ -8,6 +8,7 @@ from typing import Any
 
 from cat.envs.config import EnvCfg
 from cat.envs.field_contact import FieldContactCfg, check_obstacles
+from cat.fields.bank import STORAGES
 
 
 @dataclass
@@ -19,9 +20,15 @@ class SimCfg:
     # (cat/envs/field_contact.py, docs/training.md "Obstacles as fields"). Evaluation is always physical.
     obstacles: str = "physical"
     field_contact: FieldContactCfg = field(default_factory=FieldContactCfg)  # margin and spacing of field contact
+    # the training field bank's storage (cat.fields.bank.STORAGES): float32 | float16 | compact (d, ∇d float16, F
+    # as int8 mantissas with a shared exponent: 56 instead of 160 bytes per voxel with 12 goals; docs/fields.md).
+    # Evaluation and the demo build float32 banks whatever a run trained with.
+    field_storage: str = "float32"
 
     def __post_init__(self) -> None:
         check_obstacles(self.obstacles)  # a typo fails at load, before any scene is built
+        if self.field_storage not in STORAGES:
+            raise ValueError(f"sim.field_storage={self.field_storage!r}; valid: {', '.join(STORAGES)}")
 
 
 ALGOS = ("ppo", "distill")

@@ -310,8 +310,8 @@ def test_bench_train_on_a_scene_set_prints_its_line(mode, tmp_path, capsys):
     line = capsys.readouterr().out.strip().splitlines()[-1]
     pattern = (
         rf"case=train scenes=2 obstacles={mode} num_envs=8 env_steps_per_s=(\d+) raw_flat_env_steps_per_s=(\d+) "
-        r"ratio=([\d.]+)"
+        r"ratio=([\d.]+) field_storage=float32 bank_mb=(\d+) peak_rss_mb=(\d+)"
     )
     m = re.fullmatch(pattern, line)
     assert m is not None, line
-    assert int(m.group(1)) > 0 and int(m.group(2)) > 0
+    assert int(m.group(1)) > 0 and int(m.group(2)) > 0 and int(m.group(5)) > int(m.group(4))

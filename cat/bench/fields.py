@@ -124,15 +124,24 @@ def main(argv: list[str] | None = None) -> None:
         precision_case()
 
 
+def with_goals(scene, n: int):
+    """The scene with exactly ``n`` goals: typical ones across the far end, others cycled."""
+    if scene.kind in ("procedural", "indoor"):
+        scene.goals = np.resize(scene.goals, (n, 3))
+    else:
+        g = scene.goals[0]
+        scene.goals = np.c_[np.full(n, g[0]), np.linspace(-0.6, 0.6, n), np.full(n, g[2])]
+    return scene
+
+
 def precision_case(goals: int = 3) -> None:
     """``case=bank_precision``: float16 and compact storage against float32 on a typical, a procedural and an
     indoor scene with ``goals`` goals each (docs/fields.md)."""
-    from cat.bench.scale import _with_goals
     from cat.envs.scene_set import scene_fields
     from cat.terrain import make_indoor, make_procedural, make_typical
 
     scenes = [make_typical("hurdle-crouch", 0.5, 0), make_procedural(0.6, 1), make_indoor(2)]
-    fields = [scene_fields(_with_goals(s, goals), None, None) for s in scenes]
+    fields = [scene_fields(with_goals(s, goals), None, None) for s in scenes]
     for dtype in ("float16", "compact"):
         r = bank_precision(fields, dtype=dtype)
         print(f"case=bank_precision dtype={dtype} " + " ".join(f"{k}={v:.3g}" for k, v in r.items()), flush=True)

@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from cat.bench.fields import bench_device, median_ms
+from cat.bench.fields import bench_device, median_ms, with_goals
 from cat.bench.sim import env_rate
 from cat.envs.config import EnvCfg
 from cat.envs.scene_models import WorldModels
@@ -46,16 +46,6 @@ from cat.terrain import Scene, make_indoor, make_procedural, make_typical
 log = logging.getLogger(__name__)
 GOALS = 12
 UNIQUE = {"typical": 2, "procedural": 2, "indoor": 2}
-
-
-def _with_goals(scene: Scene, n: int) -> Scene:
-    """The scene with exactly ``n`` goals: typical ones across the far end, others cycled."""
-    if scene.kind in ("procedural", "indoor"):
-        scene.goals = np.resize(scene.goals, (n, 3))
-    else:
-        g = scene.goals[0]
-        scene.goals = np.c_[np.full(n, g[0]), np.linspace(-0.6, 0.6, n), np.full(n, g[2])]
-    return scene
 
 
 def unique_scenes(data: Path, dtype: str) -> dict[str, list[Path]]:
@@ -75,7 +65,7 @@ def unique_scenes(data: Path, dtype: str) -> dict[str, list[Path]]:
                 Scene.load(folder)
                 SceneFields.check(path, FieldCfg())
             except (OSError, ValueError, StaleFieldError):
-                scene = _with_goals(makers[kind](i), GOALS)
+                scene = with_goals(makers[kind](i), GOALS)
                 scene.save(folder)
                 g = scene.grid()
                 fields = build_fields(scene.occupancy(), Grid(g.origin, g.voxel, g.shape), scene.goals)

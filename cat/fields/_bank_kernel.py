@@ -33,10 +33,10 @@ def block_address_kernel(
 
 
 @functools.cache
-def query_kernel(scalar: type, goal_scalar: type | None = None) -> wp.Kernel:
-    """The bank query for storage scalar type ``scalar`` (``wp.float32`` or ``wp.float16``) and, with
-    ``goal_scalar=wp.int8``, F stored as 3 int8 mantissas and a shared int8 power-of-two exponent (the ``compact``
-    storage, ``cat.fields.bank.Storage``); math in float32."""
+def query_kernel(scalar: type, goal_scalar: type) -> wp.Kernel:
+    """The bank query for d, ∇d stored as ``scalar`` (``wp.float32`` or ``wp.float16``) and F as ``goal_scalar``:
+    the same type, or ``wp.int8`` for 3 mantissas and a shared power-of-two exponent (the ``compact`` storage,
+    ``cat.fields.bank.Storage``); math in float32."""
     shared_exponent = goal_scalar == wp.int8
     v4 = wp.types.vector(length=4, dtype=scalar)
     v3 = wp.types.vector(length=4, dtype=wp.int8) if shared_exponent else wp.types.vector(length=3, dtype=scalar)

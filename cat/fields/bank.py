@@ -77,7 +77,6 @@ STORAGES = {
     "compact": Storage(torch.float16, wp.float16, torch.int8, wp.int8, shared_exponent=True),
 }
 """Bank storage by name (``FieldBank(dtype=...)``, the run's ``sim.field_storage``)."""
-DTYPES = tuple(STORAGES)
 
 
 @dataclass(frozen=True)
@@ -350,8 +349,7 @@ class FieldBank:
                 torch.empty((n, k, len(QUERY_CHANNELS)), dtype=torch.float32, device=self.device),
                 torch.empty((n, k), dtype=torch.bool, device=self.device),
             )
-        st = self.storage
-        kernel = query_kernel(st.scene_wp, st.goal_wp if st.shared_exponent else None)
+        kernel = query_kernel(self.storage.scene_wp, self.storage.goal_wp)
         scene_ptr, goal_ptr, meta = self._pointers()
         values = out.values.view(-1, len(QUERY_CHANNELS))
         inside = out.inside.view(-1)

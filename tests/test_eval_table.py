@@ -21,6 +21,7 @@ from cat.eval import evaluate as evaluate_mod
 from cat.eval.evaluate import EvalTableCfg, evaluate, scene_groups
 from cat.eval.manifest import ManifestError, load_manifest
 from cat.eval.runner import run_scene_group
+from cat.eval.table import render_by_scene
 from cat.learning.hydra_cfg import load_config
 from cat.learning.runs import load_run_config, make_env, train
 from cat.terrain import TYPICAL_KINDS, make_typical, typical_variants
@@ -221,6 +222,8 @@ def test_per_type_row_plays_each_column_with_its_own_checkpoint(tmp_path, checkp
     assert len(spec_lines) == 2 and all(line.count("–") == 6 for line in spec_lines)  # 3 of 4 columns per block
     assert "Spec: each column played by that type's own checkpoint(s)" in t1
     assert "| Spec |" not in files["table2.md"] and "| Ours |" in files["table2.md"]
+    by_scene = [line for line in files["table2_by_scene.md"].splitlines() if line.startswith("| Easy |")]
+    assert by_scene and all(line.count("|") == 5 for line in by_scene)  # column, scene, trials, Ours
 
 
 def test_unseen_shapes_table_plays_other_scenes_of_the_same_layouts(tmp_path):
@@ -369,3 +372,35 @@ def test_generalist_runs_are_evaluated_one_group_at_a_time():
     assert task.scene_groups == ["crouch-pass", "side-pass"]  # the run's config is left as it was
     with pytest.raises(ValueError, match="scene_kind='stairs' is not a typical kind"):
         run_scene_group(task, scene_kind="stairs")
+
+
+def test_by_scene_breakdown_counts_each_scenes_trials():
+    """The per-scene table: SR, contact and fall per (column, scene, method) from the trial rows alone; a method
+    that did not play a scene shows –, and the trial count of each scene is printed."""
+
+    def row(method, group, scene, success, collided, fell):
+        return {
+            "table": "table2",
+            "method": method,
+            "group": group,
+            "scene": scene,
+            "success": str(success),
+            "collided": str(collided),
+            "fell": str(fell),
+        }
+
+    rows = [
+        row("A", "easy", "s1", 1, 0, 0),
+        row("A", "easy", "s1", 0, 1, 1),
+        row("A", "easy", "s1", 0, 1, 0),
+        row("A", "easy", "s1", 1, 0, 0),
+        row("B", "easy", "s1", 0, 0, 1),
+        row("B", "easy", "s1", 0, 0, 1),
+        row("B", "easy", "s1", 1, 0, 0),
+        row("B", "easy", "s1", 1, 0, 0),
+        row("A", "hard", "s2", 0, 1, 0),
+        {**row("A", "easy", "s1", 1, 0, 0), "table": "table1"},
+    ]
+    md = render_by_scene(rows, "table2", ["A", "B"], ["easy", "hard"])
+    lines = [line for line in md.splitlines() if line.startswith("| Easy") or line.startswith("| Hard")]
+    assert lines == ["| Easy | s1 | 4 | 50 (50 / 25) | 50 (0 / 50) |", "| Hard | s2 | 1 | 0 (100 / 0) | – |"]

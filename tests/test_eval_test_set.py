@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 
 from cat.eval.test_set import UnseenSetCfg, build_test_set, candidate
 from cat.terrain import Scene, make_indoor
@@ -59,3 +60,25 @@ def test_starts_are_standing_poses_and_the_first_set_is_still_buildable(tmp_path
     scene.mesh = combine([scene.mesh, box((wall, -2.0, 0.0), (wall + 0.1, 2.0, 1.5))])
     scene._occ.clear()
     assert not start_is_standing(scene, cfg.stand_height, cfg.start_stand_radius)
+
+
+def test_goal_stand_radius_measures_and_filters_goals_next_to_furniture(tmp_path):
+    """``goal_stand_radii``: a goal 0.15 m from a wall stands at 0.12 m but not at 0.24 m, a goal in the open at
+    the largest radius; with ``goal_stand_radius`` > 0 the set keeps only goals standing at it (each listed in
+    index.json with its radius), and a negative radius is refused."""
+    from cat.eval.test_set import GOAL_RADII, goal_stand_radii
+    from cat.terrain.primitives import box
+
+    wall = box((1.85, -1.0, 0.0), (1.95, 1.0, 1.5))
+    bounds = np.array([[-2.5, -2.5, 0.0], [2.5, 2.5, 2.0]])
+    scene = Scene(wall, bounds, start=(0.0, 0.0), goals=[(1.7, 0.0), (0.0, 1.5)])
+    near, free = goal_stand_radii(scene)
+    assert 0.08 <= near < 0.24 and free == max(GOAL_RADII)
+
+    cfg = UnseenSetCfg(out=str(tmp_path / "g"), num_scenes=2, fields=False, goal_stand_radius=0.24)
+    index = build_test_set(cfg, progress=False)
+    for e in index:
+        assert len(e["goal_stand_radius"]) == e["goals"] and min(e["goal_stand_radius"]) >= 0.24
+        assert (goal_stand_radii(Scene.load(tmp_path / "g" / e["folder"])) >= 0.24).all()
+    with pytest.raises(ValueError, match="goal_stand_radius must be >= 0"):
+        build_test_set(UnseenSetCfg(out=str(tmp_path / "x"), goal_stand_radius=-0.1), progress=False)

@@ -25,7 +25,7 @@ from cat.envs.config import SuccessCfg
 from cat.envs.trial_metrics import TrialResult
 from cat.eval.manifest import Manifest, ManifestError, MethodRun, load_manifest
 from cat.eval.runner import EvalCfg, HoldPolicy, SceneGroup, make_eval_env, run_trials
-from cat.eval.table import CSV_COLUMNS, render_latex, render_markdown
+from cat.eval.table import CSV_COLUMNS, render_by_scene, render_latex, render_markdown
 from cat.eval.trials import Trial, scene_trials
 from cat.run.policy import load_policy
 from cat.terrain import TYPICAL_KINDS
@@ -180,6 +180,7 @@ def evaluate(cfg: EvalTableCfg, live=None) -> tuple[list[dict[str, str]], dict[s
             )
         files[f"{table}.md"] = render_markdown(rows, table, shown, names, text)
         files[f"{table}.tex"] = render_latex(rows, table, shown, names, text)
+        files[f"{table}_by_scene.md"] = render_by_scene(rows, table, shown, names)
     return rows, files
 
 

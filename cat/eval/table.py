@@ -129,6 +129,39 @@ def render_markdown(rows: Sequence[dict], table: str, methods: Sequence[str], gr
     return "\n".join(out)
 
 
+def render_by_scene(rows: Sequence[dict], table: str, methods: Sequence[str], groups: Sequence[str]) -> str:
+    """Per scene of each column: every method's SR over that scene's trials, with its contact and fall rates.
+
+    The breakdown behind a column's mean ± std over scenes (Table II's 15 per column): which scenes a method
+    passes and whether it fails them by touching or by falling. All from the trial rows, as the tables are."""
+    rows = [r for r in rows if r["table"] == table]
+    trials: dict[tuple[str, str, str], list[dict]] = {}
+    for r in rows:
+        trials.setdefault((r["group"], r["scene"], r["method"]), []).append(r)
+    head = ["Column", "Scene", "Trials"] + [f"{m}: SR % (contact / fall %)" for m in methods]
+    out = [
+        f"**{TITLES.get(table, table)}, per scene.** SR over each scene's trials; contact and fall: the share of "
+        "those trials that touched an obstacle or fell (a trial may do both).",
+        "",
+        "| " + " | ".join(head) + " |",
+        "|" + "---|" * len(head),
+    ]
+    for group in groups:
+        scenes = sorted({s for g, s, _ in trials if g == group})
+        for scene in scenes:
+            counts = {len(trials[group, scene, m]) for m in methods if (group, scene, m) in trials}
+            line = [_title(group), scene, "/".join(str(n) for n in sorted(counts))]
+            for m in methods:
+                ts = trials.get((group, scene, m))
+                if not ts:
+                    line.append("–")
+                    continue
+                pct = {k: 100.0 * sum(int(t[k]) for t in ts) / len(ts) for k in ("success", "collided", "fell")}
+                line.append(f"{pct['success']:.0f} ({pct['collided']:.0f} / {pct['fell']:.0f})")
+            out.append("| " + " | ".join(line) + " |")
+    return "\n".join(out + [""])
+
+
 def _tex_escape(text: str) -> str:
     for a, b in (("\\", r"\textbackslash{}"), ("&", r"\&"), ("%", r"\%"), ("_", r"\_"), ("#", r"\#")):
         text = text.replace(a, b)

@@ -62,6 +62,9 @@ class UnseenSetCfg:
     # 0: only the paper's 0.1 m floor erosion (the first test set, 24 % of its trials starting in contact)
     start_stand_radius: float = 0.24
     stand_height: float = EpisodeCfg.stand_height  # [m], the training starts' standing height
+    # keep only goals whose column stands at this radius (the start rule, applied to where a trial must end);
+    # 0: every reachable goal, as the sets so far were built (docs/evaluation.md, "Goals next to furniture")
+    goal_stand_radius: float = 0.0
 
 
 def start_is_standing(scene: Scene, height: float, radius: float) -> bool:
@@ -75,11 +78,36 @@ def start_is_standing(scene: Scene, height: float, radius: float) -> bool:
     return bool(len(i) and len(j) and stand[np.ix_(i, j)].all())
 
 
+GOAL_RADII = tuple(round(0.04 * k, 2) for k in range(11))  # 0 .. 0.40 m, the steps of goal_stand_radii
+
+
+def goal_stand_radii(scene: Scene, height: float = EpisodeCfg.stand_height, radii=GOAL_RADII) -> np.ndarray:
+    """Per goal, the largest of ``radii`` at which the goal's column is a standing column (``standing_mask``: free
+    to ``height`` within that radius), -1 where it is not free even at 0 (a goal under furniture).
+
+    A trial succeeds only if the robot stands within 0.1 m of its goal touching nothing; at a goal 0.1 m from a
+    wardrobe the G1's arms (0.35-0.4 m out at the default pose) cannot."""
+    grid = scene.grid()
+    occ = scene.occupancy()
+    idx = [tuple(grid.index(np.r_[g[:2], min(float(g[2]), height / 2)])[:2]) for g in scene.goals]
+    best = np.full(len(idx), -1.0)
+    for r in sorted(radii):
+        stand = standing_mask(occ, grid.voxel, height, r)
+        ok = np.array([0 <= i < stand.shape[0] and 0 <= j < stand.shape[1] and stand[i, j] for i, j in idx])
+        best[ok] = r
+    return best
+
+
 def candidate(
-    seed: int, goals_per_scene: int, start_stand_radius: float = 0.0, stand_height: float = EpisodeCfg.stand_height
+    seed: int,
+    goals_per_scene: int,
+    start_stand_radius: float = 0.0,
+    stand_height: float = EpisodeCfg.stand_height,
+    goal_stand_radius: float = 0.0,
 ) -> Scene | None:
-    """The test-stream indoor crop of ``seed`` with at most ``goals_per_scene`` goals (None: no valid crop, or with
-    ``start_stand_radius`` > 0 a start region that is not all standing columns)."""
+    """The test-stream indoor crop of ``seed`` with at most ``goals_per_scene`` goals (None: no valid crop, with
+    ``start_stand_radius`` > 0 a start region that is not all standing columns, or with ``goal_stand_radius`` > 0
+    no goal that stands at that radius)."""
     try:
         scene = make_indoor(seed, stream=TEST_STREAM)
     except SceneError as err:
@@ -88,6 +116,12 @@ def candidate(
     if start_stand_radius > 0 and not start_is_standing(scene, stand_height, start_stand_radius):
         log.info("test seed %d skipped: its start is within %g m of furniture", seed, start_stand_radius)
         return None
+    if goal_stand_radius > 0:
+        keep = goal_stand_radii(scene, stand_height, (goal_stand_radius,)) >= goal_stand_radius
+        if not keep.any():
+            log.info("test seed %d skipped: no goal stands at %g m", seed, goal_stand_radius)
+            return None
+        scene.goals = scene.goals[keep]
     g = len(scene.goals)
     if g > goals_per_scene:
         keep = np.unique(np.round(np.linspace(0, g - 1, goals_per_scene)).astype(int))
@@ -107,12 +141,17 @@ def build_test_set(cfg: UnseenSetCfg, progress: bool = True) -> list[dict]:
     """Generate (or re-use, when complete and identical) the test set under ``cfg.out``; returns the index."""
     if cfg.num_scenes < 2 or cfg.num_scenes % 2:
         raise ValueError(f"num_scenes must be an even number >= 2, got {cfg.num_scenes}")
+    if cfg.goal_stand_radius < 0 or cfg.start_stand_radius < 0:
+        raise ValueError(
+            f"start_stand_radius and goal_stand_radius must be >= 0, got {cfg.start_stand_radius}, "
+            f"{cfg.goal_stand_radius}"
+        )
     scenes: dict[int, Scene] = {}
     bar = tqdm(total=cfg.num_scenes, desc="test scenes", unit="scene", disable=not progress)
     for seed in range(cfg.max_seeds):
         if len(scenes) == cfg.num_scenes:
             break
-        scene = candidate(seed, cfg.goals_per_scene, cfg.start_stand_radius, cfg.stand_height)
+        scene = candidate(seed, cfg.goals_per_scene, cfg.start_stand_radius, cfg.stand_height, cfg.goal_stand_radius)
         if scene is not None:
             scenes[seed] = scene
             bar.update(1)
@@ -127,7 +166,8 @@ def build_test_set(cfg: UnseenSetCfg, progress: bool = True) -> list[dict]:
             _write(scenes[seed], folder, cfg.fields)
             s = scenes[seed]
             index.append({"folder": str(folder.relative_to(out)), "split": group, "seed": seed,
-                          "density": round(float(s.difficulty), 6), "goals": len(s.goals)})  # fmt: skip
+                          "density": round(float(s.difficulty), 6), "goals": len(s.goals),
+                          "goal_stand_radius": goal_stand_radii(s, cfg.stand_height).tolist()})  # fmt: skip
     for group in ("easy", "hard"):  # folders of an earlier build with other settings
         keep = {Path(e["folder"]).name for e in index if e["split"] == group}
         for old in sorted((out / group).glob("test_*")):

@@ -315,3 +315,24 @@ def test_bench_train_on_a_scene_set_prints_its_line(mode, tmp_path, capsys):
     m = re.fullmatch(pattern, line)
     assert m is not None, line
     assert int(m.group(1)) > 0 and int(m.group(2)) > 0 and int(m.group(5)) > int(m.group(4))
+
+
+def test_bench_soak_on_a_scene_folder_in_field_mode_prints_its_counts(tmp_path, capsys):
+    """``bench.py soak --scene-dir D --obstacles field --field-storage compact`` at a tiny size: random actions
+    through floor-only worlds, its line counts non-finite values, states and MuJoCo's own resets."""
+    import re
+
+    from cat.bench.soak import main as soak
+
+    for i, face in enumerate((FACE_X, 1.4)):
+        wall_scene(face).save(tmp_path / f"w{i}")
+    soak(
+        ["steps=64", "--envs", "4", "--scene-dir", str(tmp_path), "--obstacles", "field"]
+        + ["--field-storage", "compact"]
+    )
+    line = capsys.readouterr().out.strip().splitlines()[-1]
+    pattern = (
+        r"case=soak steps=64 nonfinite=0 nonfinite_state=0 auto_resets=0 resets=(\d+) by_cause=\S* envs=4 "
+        r"sim=mujoco layout=tiles obstacles=field scenes=2 field_storage=compact seconds=\d+"
+    )
+    assert re.fullmatch(pattern, line), line

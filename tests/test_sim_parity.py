@@ -310,3 +310,18 @@ def test_domain_randomisation_parity(model, robot_cfg):
     plain = rollout(WarpBackend(m, n, robot_cfg.decimation, "cpu"), qpos, qvel, ctrl)
     assert np.abs(plain["qpos"][:, 0] - got["qpos"][:, 0]).max() > 10 * TIGHT["qpos"]  # world 0 changed
     np.testing.assert_array_equal(plain["qpos"][:, 1], got["qpos"][:, 1])  # world 1 did not
+
+
+def test_mujoco_auto_reset_of_a_diverged_world_is_counted(model, robot_cfg):
+    """A world sent off with a velocity MuJoCo rejects (> mjMAXVAL) is reset by MuJoCo inside the rollout (its
+    clock jumps back to 0): ``auto_resets`` counts it, and the healthy worlds do not add to the count."""
+    backend = MujocoBackend(model, 3, robot_cfg.decimation)
+    qpos, qvel = initial_states(robot_cfg, 3, seed=2)
+    qvel[1, 0] = 1e12  # world 1 diverges at its first substep
+    backend.reset(torch.arange(3), torch.as_tensor(qpos), torch.as_tensor(qvel))
+    ctrl = torch.as_tensor(actions(robot_cfg, 3, 1)[0])
+    backend.step(ctrl)
+    assert backend.auto_resets == 1
+    for _ in range(3):
+        backend.step(ctrl)
+    assert backend.auto_resets == 1 and torch.isfinite(backend.qpos).all()

@@ -2,11 +2,16 @@
 and rewards and the episode resets by cause.
 
 Scenes: the eight typical types, two procedural and two indoor scenes (cached in ``--data``), tiled in one
-model, or with ``--per-world`` one scene per world (``sim.per_world_scenes``); ``--sim warp`` runs mujoco_warp.
+model, or with ``--per-world`` one scene per world (``sim.per_world_scenes``); ``--scene-dir`` takes every scene
+folder under a directory instead (e.g. a ≥ 300-scene hybrid set, free start / goal sampling as training on scene
+sets does). ``--obstacles field`` steps floor-only worlds with field-judged contact (``sim.obstacles``),
+``--field-storage`` picks the bank's storage (``sim.field_storage``), ``--sim warp`` runs mujoco_warp.
 Actions are uniform in [-1, 1], pushes on. Reward terms are counted *before* the env's ``nan_to_num`` (the term
-functions are wrapped for the run), so a non-finite value cannot hide; each reset is attributed to the termination
-terms that fired (the env's ``termination_flags``), or ``time_out``.
-Prints ``case=soak steps=<n> nonfinite=<k> resets=<r> by_cause=<cause:count,...>``.
+functions are wrapped for the run), so a non-finite value cannot hide; the physics state (qpos, qvel) is
+checked after every step, and a world MuJoCo reset on its own (``PhysicsBackend.auto_resets``) is counted; each
+reset is attributed to the termination terms that fired (the env's ``termination_flags``), or ``time_out``.
+Prints ``case=soak steps=<n> nonfinite=<k> nonfinite_state=<k> auto_resets=<k> resets=<r> by_cause=<cause:count,...>``
+(``nonfinite``: observations and rewards).
 """
 
 from __future__ import annotations
@@ -22,6 +27,7 @@ import torch
 from tqdm import tqdm
 
 from cat.envs.config import EnvCfg, PushCfg
+from cat.envs.episodes import EpisodeCfg
 from cat.envs.mdp import rewards as rew_terms
 from cat.envs.scene_set import SceneSet
 from cat.envs.traversal_env import TraversalEnv
@@ -89,6 +95,9 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--sim", choices=("mujoco", "warp"), default="mujoco")
     p.add_argument("--per-world", action="store_true", help="each world holds only its own scene's obstacles")
+    p.add_argument("--scene-dir", default=None, help="every scene folder under this directory (free episodes)")
+    p.add_argument("--obstacles", choices=("physical", "field"), default="physical")
+    p.add_argument("--field-storage", choices=("float32", "float16", "compact"), default="float32")
     args = p.parse_args(argv)
     if not args.steps.startswith("steps="):
         raise SystemExit(f"expected steps=<n>, got {args.steps!r}")
@@ -98,17 +107,23 @@ def main(argv: list[str] | None = None) -> None:
 
     wp.config.log_level = wp.LOG_WARNING  # keep stdout to result lines
 
-    scenes, folders = soak_scenes(Path(args.data))
-
-    def load(i: int) -> SceneFields:
-        return SceneFields.load(Scene.fields_dir(folders[i]) / STORE_FILE)
-
-    sset = SceneSet(scenes, load, args.envs, per_world=args.per_world)
     cfg = EnvCfg(num_envs=args.envs, push=PushCfg(enabled=True))
-    env = TraversalEnv(cfg, sim=args.sim, scenes=sset, seed=args.seed)
+    if args.scene_dir is not None:
+        cfg.episodes = EpisodeCfg(mode="free")
+        sset = SceneSet.from_dir(
+            args.scene_dir, args.envs, dtype=args.field_storage, per_world=args.per_world, episodes=cfg.episodes
+        )
+    else:
+        scenes, folders = soak_scenes(Path(args.data))
+
+        def load(i: int) -> SceneFields:
+            return SceneFields.load(Scene.fields_dir(folders[i]) / STORE_FILE)
+
+        sset = SceneSet(scenes, load, args.envs, per_world=args.per_world, dtype=args.field_storage)
+    env = TraversalEnv(cfg, sim=args.sim, scenes=sset, seed=args.seed, obstacles=args.obstacles)
     gen = torch.Generator().manual_seed(args.seed)
     causes: Counter = Counter()
-    nonfinite_obs, resets, steps = 0, 0, 0
+    nonfinite_obs, nonfinite_state, resets, steps = 0, 0, 0, 0
     rew_names = list(env.reward_names)
     t0 = time.perf_counter()
     bar = tqdm(total=total, desc="soak", unit="step", unit_scale=True, mininterval=30)
@@ -119,6 +134,7 @@ def main(argv: list[str] | None = None) -> None:
             bar.update(args.envs)
             nonfinite_obs += sum(int((~torch.isfinite(v)).sum()) for v in obs.values())
             rew.nonfinite += int((~torch.isfinite(reward)).sum())
+            nonfinite_state += int((~torch.isfinite(env.sim.qpos)).sum() + (~torch.isfinite(env.sim.qvel)).sum())
             ids = done.nonzero().flatten()
             resets += len(ids)
             for i in ids.tolist():
@@ -126,10 +142,14 @@ def main(argv: list[str] | None = None) -> None:
                 causes.update(named or ["time_out"])
     by_cause = ",".join(f"{k}:{v}" for k, v in sorted(causes.items()))
     print(
-        f"case=soak steps={steps} nonfinite={nonfinite_obs + rew.nonfinite} resets={resets} by_cause={by_cause}"
+        f"case=soak steps={steps} nonfinite={nonfinite_obs + rew.nonfinite} nonfinite_state={nonfinite_state}"
+        f" auto_resets={env.sim.auto_resets} resets={resets} by_cause={by_cause}"
         f" envs={args.envs} sim={args.sim} layout={'per_world' if args.per_world else 'tiles'}"
+        f" obstacles={args.obstacles} scenes={len(sset.scenes)} field_storage={args.field_storage}"
         f" seconds={time.perf_counter() - t0:.0f}",
         flush=True,
     )
-    if nonfinite_obs + rew.nonfinite:
-        log.warning("non-finite: %d in observations, %d in rewards", nonfinite_obs, rew.nonfinite)
+    if nonfinite_obs + rew.nonfinite + nonfinite_state:
+        log.warning(
+            "non-finite: %d in observations, %d in rewards, %d in states", nonfinite_obs, rew.nonfinite, nonfinite_state
+        )

@@ -74,6 +74,10 @@ class PhysicsBackend(ABC):
         #: sensordata columns reduced with max over the substeps of a control step (see the module docstring)
         slices = [self.sensors[name] for name in max_sensors]
         self.max_columns = [c for s in slices for c in range(s.adr, s.adr + s.dim)]
+        #: world-steps in which the simulator reset a world on its own (MuJoCo's auto-reset on a bad qacc, which
+        #: hides a divergence as a jump back to qpos0); counted since construction. mujoco_warp has no auto-reset:
+        #: a diverged world shows as non-finite state instead.
+        self.auto_resets = 0
 
     # --- state views (N, ...): backends set ``_qpos``, ``_qvel``, ``_sens`` to torch views of their state ----
     _qpos: torch.Tensor

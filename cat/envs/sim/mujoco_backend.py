@@ -123,7 +123,12 @@ class MujocoBackend(PhysicsBackend):
             self._take_outputs(ids, out_state, out_sens)
 
     def _take_outputs(self, ids: np.ndarray | slice, out_state: np.ndarray, out_sens: np.ndarray) -> None:
-        """Last substep's state and sensors of worlds ``ids``; ``max_columns`` as the max over the substeps."""
+        """Last substep's state and sensors of worlds ``ids``; ``max_columns`` as the max over the substeps.
+
+        A world whose clock did not advance by ``decimation`` timesteps was reset by MuJoCo inside the rollout
+        (``mj_resetData`` after a bad qacc sets time to 0): counted in ``auto_resets``."""
+        expected = self._state[ids, 0] + self.decimation * self.model.opt.timestep
+        self.auto_resets += int(np.count_nonzero(np.abs(out_state[:, -1, 0] - expected) > 1e-6))
         self._state[ids] = out_state[:, -1]
         self._sens_np[ids] = out_sens[:, -1]
         if self.max_columns:

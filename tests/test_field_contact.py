@@ -310,7 +310,8 @@ def test_bench_train_on_a_scene_set_prints_its_line(mode, tmp_path, capsys):
     line = capsys.readouterr().out.strip().splitlines()[-1]
     pattern = (
         rf"case=train scenes=2 obstacles={mode} num_envs=8 env_steps_per_s=(\d+) raw_flat_env_steps_per_s=(\d+) "
-        r"ratio=([\d.]+) field_storage=float32 bank_mb=(\d+) peak_rss_mb=(\d+)"
+        r"ratio=([\d.]+) field_storage=float32 bank_mb=(\d+) peak_rss_mb=(\d+) "
+        r"rss_mb=start:\d+,scenes:\d+,bank:\d+,env:\d+,train:\d+"
     )
     m = re.fullmatch(pattern, line)
     assert m is not None, line

@@ -8,9 +8,11 @@ The scenes come from ``--scene-dir`` (its first N scene folders) or, by default,
 generator (the eight typical kinds in turn, difficulties spread over [0, 1]).
 
 Prints ``case=train scenes=<n> obstacles=<mode> num_envs=<n> env_steps_per_s=<x> raw_flat_env_steps_per_s=<y>
-ratio=<x/y> field_storage=<s> bank_mb=<b> peak_rss_mb=<m>`` (the process's peak resident memory: the whole
-training setup, bank, models, env and learner). ``sim.field_storage=compact`` (an override) is the paper-scale
-bank in 10.4 GiB for 355 scenes x 12 goals.
+ratio=<x/y> field_storage=<s> bank_mb=<b> peak_rss_mb=<m> rss_mb=start:<a>,scenes:<b>,bank:<c>,env:<d>,train:<e>``
+(the process's peak resident memory: the whole training setup, bank, models, env and learner; then the resident
+memory after imports, after loading the scenes, after filling the bank, after building the env and after the
+iterations, which says where memory outside the bank goes). ``sim.field_storage=compact`` (an override) is the
+paper-scale bank in 10.4 GiB for 355 scenes x 12 goals.
 """
 
 from __future__ import annotations
@@ -54,7 +56,14 @@ def typical_scenes(n: int, seed: int = 0) -> list[Scene]:
     return out
 
 
-def scene_set(args: argparse.Namespace, cfg: TrainCfg, num_envs: int) -> SceneSet:
+def rss_mb() -> float:
+    """The process's resident memory now [MiB] (Linux ``/proc/self/statm``)."""
+    with open("/proc/self/statm") as f:
+        return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+
+
+def scene_set(args: argparse.Namespace, cfg: TrainCfg, num_envs: int, rss: dict[str, float]) -> SceneSet:
+    """The bench's scene set; ``rss`` gets the resident memory after the scenes are loaded."""
     kw = dict(per_world=cfg.sim.per_world_scenes, dtype=cfg.sim.field_storage)
     if args.scene_dir:
         folders = scene_folders(Path(args.scene_dir))[: args.scenes]
@@ -62,9 +71,10 @@ def scene_set(args: argparse.Namespace, cfg: TrainCfg, num_envs: int) -> SceneSe
             raise SystemExit(f"--scene-dir {args.scene_dir} holds {len(folders)} scene folders, --scenes {args.scenes}")
         scenes = [Scene.load(f) for f in folders]
         fields = lambda i: scene_fields(scenes[i], folders[i], None)  # noqa: E731  (read one scene at a time)
-        return SceneSet(scenes, fields, num_envs, cfg.sim.device, **kw)
-    scenes = typical_scenes(args.scenes)
-    fields = lambda i: scene_fields(scenes[i], None, None)  # noqa: E731  (built one scene at a time)
+    else:
+        scenes = typical_scenes(args.scenes)
+        fields = lambda i: scene_fields(scenes[i], None, None)  # noqa: E731  (built one scene at a time)
+    rss["scenes"] = rss_mb()
     return SceneSet(scenes, fields, num_envs, cfg.sim.device, **kw)
 
 
@@ -112,16 +122,21 @@ def main(argv: list[str] | None = None) -> None:
     cfg = load_config([*overrides, f"sim.obstacles={args.obstacles}"])
     set_torch_threads(cfg.torch_threads)
     n = args.num_envs
-    sset = scene_set(args, cfg, n)
+    rss = {"start": rss_mb()}
+    sset = scene_set(args, cfg, n, rss)
+    rss["bank"] = rss_mb()
     task = replace(cfg.task, num_envs=n, warmup_variants=0)
     sim, fc = cfg.sim, cfg.sim.field_contact
     mode = sim.obstacles
     env = TraversalEnv(task, sim.backend, sim.device, scenes=sset, seed=cfg.seed, obstacles=mode, field_contact=fc)
+    rss["env"] = rss_mb()
     x = ppo_rate(env, cfg, args.iterations)
+    rss["train"] = rss_mb()
     y = raw_flat_rate(env.robot, env.num_envs, args.seconds, cfg.seed)
     peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # Linux: KiB
     print(
         f"case=train scenes={len(sset.scenes)} obstacles={env.obstacles} num_envs={env.num_envs} "
         f"env_steps_per_s={x:.0f} raw_flat_env_steps_per_s={y:.0f} ratio={x / y:.2f} "
-        f"field_storage={sim.field_storage} bank_mb={sset.bank.nbytes / 2**20:.0f} peak_rss_mb={peak_mb:.0f}"
+        f"field_storage={sim.field_storage} bank_mb={sset.bank.nbytes / 2**20:.0f} peak_rss_mb={peak_mb:.0f} "
+        f"rss_mb={','.join(f'{k}:{v:.0f}' for k, v in rss.items())}"
     )

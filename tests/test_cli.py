@@ -162,3 +162,27 @@ def test_resume_overrides_keys_only_the_runs_task_has(tiny_run, tmp_path):
     loaded = _script()._load([f"resume={ckpt}", "task.observations.probe.noise=true", "max_iterations=3"])
     assert loaded.task.observations["probe"].noise is True and loaded.max_iterations == 3
     assert loaded.resume == str(ckpt)
+
+
+def test_plot_training_draws_a_chain_of_runs_over_env_steps(tmp_path, caplog):
+    """``runs=[a,b]``: the second run's iterations continue after the first's env steps (each run's own steps per
+    iteration); a chain without ``out=``, or both ``run`` and ``runs``, is one clear error."""
+    mod = _script("plot_training")
+    dirs = []
+    for name, envs, iters in (("a", 8, 3), ("b", 16, 2)):
+        d = tmp_path / name
+        d.mkdir()
+        (d / "config.yaml").write_text(f"num_envs: {envs}\ntask: {{num_envs: 4}}\nalgo: {{num_steps_per_env: 10}}\n")
+        rows = ["iteration,tag,value"] + [f"{i},Train/mean_reward,{i + 1}" for i in range(iters)]
+        (d / "metrics.csv").write_text("\n".join(rows) + "\n")
+        dirs.append(d)
+    series, starts = mod.chain(dirs)
+    xs = [x for x, _ in series["Train/mean_reward"]]
+    assert starts == pytest.approx([0.0, 240e-6]) and xs == pytest.approx([80e-6, 160e-6, 240e-6, 400e-6, 560e-6])
+    out = tmp_path / "chain.png"
+    assert mod.main([f"runs=[{dirs[0]},{dirs[1]}]", f"out={out}"]) == 0 and out.stat().st_size > 0
+    with caplog.at_level(logging.ERROR):
+        assert mod.main([f"runs=[{dirs[0]}]"]) == 2
+        assert mod.main([f"run={dirs[0]}", f"runs=[{dirs[1]}]", f"out={out}"]) == 2
+    errors = [r.getMessage() for r in caplog.records if r.levelno >= logging.ERROR]
+    assert "needs out=" in errors[0] and "one of them" in errors[1], errors

@@ -186,3 +186,22 @@ def test_evaluation_never_samples_free_episodes():
     task = EnvCfg(num_envs=4, episodes=EpisodeCfg(mode="free", goal_distance=(5.0, 6.0)))
     assert eval_task(task, 4, EvalCfg()).episodes.mode == "scene"
     assert task.episodes.mode == "free"  # the run's config is not changed
+
+
+def test_goal_stand_radius_serves_only_goals_a_robot_can_stand_at():
+    """Two corridor goals, one in the open and one 0.15 m from the upper wall: at ``goal_stand_radius=0.24`` only
+    the open one is served (every draw heads for it); at 0 both are; a radius no goal meets is one clear error."""
+    scene = corridor_scene(goal_in_wall=False)
+    scene.goals = np.array([[1.6, 0.0, scene.goals[0, 2]], [1.2, 0.55, scene.goals[0, 2]]])
+    voxel = scene.grid().voxel
+    both = EpisodeSampler([scene], EpisodeCfg(mode="free", goal_distance=(LO, HI)), voxel)
+    assert both.starts[0].goals_served.tolist() == [True, True]
+    cfg = EpisodeCfg(mode="free", goal_distance=(LO, HI), goal_stand_radius=0.24)
+    open_only = EpisodeSampler([scene], cfg, voxel)
+    assert open_only.starts[0].goals_served.tolist() == [True, False]
+    gen = torch.Generator().manual_seed(0)
+    assert {open_only.sample(0, 1.0, gen)[1] for _ in range(50)} == {0}
+    with pytest.raises(EpisodeError, match="goal_stand_radius=0.7"):
+        EpisodeSampler([scene], EpisodeCfg(mode="free", goal_distance=(LO, HI), goal_stand_radius=0.7), voxel)
+    with pytest.raises(EpisodeError, match="goal_stand_radius must be >= 0"):
+        EpisodeSampler([scene], EpisodeCfg(mode="free", goal_stand_radius=-0.1), voxel)

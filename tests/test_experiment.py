@@ -266,6 +266,10 @@ def test_a_key_added_at_its_old_behaviour_keeps_the_run_hashes(tmp_path):
 
     assert "field_storage" not in _comparable(load_config([]))["sim"]
     assert _comparable(load_config(["sim.field_storage=compact"]))["sim"]["field_storage"] == "compact"
+    # a nested key (task.episodes.goal_stand_radius) likewise
+    assert "goal_stand_radius" not in _comparable(load_config(["task=scenes"]))["task"]["episodes"]
+    on = _comparable(load_config(["task=scenes", "task.episodes.goal_stand_radius=0.24"]))
+    assert on["task"]["episodes"]["goal_stand_radius"] == 0.24
     hashes = []
     for storage in ("float32", "compact"):
         cells = {

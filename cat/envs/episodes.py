@@ -15,7 +15,8 @@ Feasibility is computed once per scene from its occupancy: a *standing* column i
 to a goal is the 8-connected shortest path (``skimage.graph.MCP_Geometric``) over the *walkable* columns of
 ``cat.terrain.voxel.walkable`` (the humanoid may step over low obstacles and crouch under high ones, as the
 scene generators' reachability test assumes). A start is a standing column at a finite geodesic distance in
-range, jittered within its voxel.
+range, jittered within its voxel. With ``goal_stand_radius`` > 0 a goal is served only if its own column stands at
+that radius (the test set's ``goal_stand_radius``, ``cat.eval.test_set``): a trial there can end without contact.
 """
 
 from __future__ import annotations
@@ -46,6 +47,9 @@ class EpisodeCfg:
     distance_curriculum: bool = True  # the range's upper bound grows with the env's curriculum level
     stand_height: float = 1.35  # free height above a start [m] (G1 upright: ~1.32 m)
     stand_radius: float = 0.40  # free radius around a start [m] (G1 at its default pose: wrists ~0.35-0.4 m out)
+    # > 0: only goals whose column stands at this radius (free to stand_height) are served; a goal 0.1 m from a
+    # wardrobe (the scene generators' reachability allows it) cannot be reached without touching. 0: every goal
+    goal_stand_radius: float = 0.0
 
 
 class EpisodeError(ValueError):
@@ -61,6 +65,8 @@ def check_episode_cfg(cfg: EpisodeCfg) -> None:
         raise EpisodeError(f"task.episodes.goal_distance must satisfy 0 < min <= max, got {[lo, hi]}")
     if cfg.stand_height <= 0 or cfg.stand_radius < 0:
         raise EpisodeError("task.episodes.stand_height must be > 0 and stand_radius >= 0")
+    if cfg.goal_stand_radius < 0:
+        raise EpisodeError(f"task.episodes.goal_stand_radius must be >= 0, got {cfg.goal_stand_radius}")
 
 
 @dataclass
@@ -92,12 +98,14 @@ def scene_starts(scene: Scene, cfg: EpisodeCfg, reach: ReachCfg | None = None) -
     walk = walkable(occ, grid, reach)
     # a goal column that the body radius just misses still seeds its walkable neighbourhood
     walk_seed = walk | ndimage.binary_dilation(walk) & ~occ[:, :, 0]
+    goal_ok = standing_mask(occ, grid.voxel, cfg.stand_height, cfg.goal_stand_radius) if cfg.goal_stand_radius else None
     lo, hi = cfg.goal_distance
     centres = np.stack(np.meshgrid(*[grid.axes()[a] for a in (0, 1)], indexing="ij"), axis=-1)
     points, distance = [], []
     for goal in scene.goals:
         i, j = grid.index(goal[None])[0, :2]
-        if not (0 <= i < occ.shape[0] and 0 <= j < occ.shape[1]):
+        inside = 0 <= i < occ.shape[0] and 0 <= j < occ.shape[1]
+        if not inside or (goal_ok is not None and not goal_ok[i, j]):
             points.append(np.zeros((0, 2)))
             distance.append(np.zeros(0))
             continue
@@ -125,8 +133,10 @@ class EpisodeSampler:
         served = [i for i in free if self.starts[i].goals_served.any()]
         if free and not served:
             raise EpisodeError(
-                f"task.episodes.goal_distance={list(cfg.goal_distance)}: no goal of the {len(free)} scene(s) of kinds "
-                f"{sorted({scenes[i].kind for i in free})} is reachable from a standing start in that range"
+                f"task.episodes.goal_distance={list(cfg.goal_distance)}"
+                + (f" with goal_stand_radius={cfg.goal_stand_radius}" if cfg.goal_stand_radius else "")
+                + f": no goal of the {len(free)} scene(s) of kinds {sorted({scenes[i].kind for i in free})} is "
+                "reachable from a standing start in that range"
             )
         for i in sorted(set(free) - set(served)):
             log.warning("scene %d (%s): no start in goal_distance; it keeps its own start region", i, scenes[i].kind)

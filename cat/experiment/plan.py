@@ -25,7 +25,7 @@ from cat.learning.hydra_cfg import load_config
 # keys that do not change what a run learns (or are the budget, handled apart)
 VOLATILE = ("run_dir", "run_root", "run_name", "max_minutes", "max_iterations", "verbose", "torch_threads")
 VOLATILE += ("init", "resume", "teachers")
-NEUTRAL_DEFAULTS = {("sim", "field_storage"): "float32"}
+NEUTRAL_DEFAULTS = {("sim", "field_storage"): "float32", ("task", "episodes", "goal_stand_radius"): 0.0}
 """Keys added after runs were hashed, with the value that reproduces what those runs did: left out of the hash at
 that value, so adding the key does not make every unfinished run "changed" (a key added at its old behaviour)."""
 STATE_FILE = "state.json"
@@ -46,9 +46,12 @@ def _comparable(cfg) -> dict:
     out = OmegaConf.to_container(OmegaConf.structured(cfg))
     for key in VOLATILE:
         out.pop(key, None)
-    for (group, key), neutral in NEUTRAL_DEFAULTS.items():
-        if out.get(group, {}).get(key, neutral) == neutral:
-            out.get(group, {}).pop(key, None)
+    for path, neutral in NEUTRAL_DEFAULTS.items():
+        parent = out
+        for part in path[:-1]:
+            parent = parent.get(part) if isinstance(parent, dict) else None
+        if isinstance(parent, dict) and parent.get(path[-1], neutral) == neutral:
+            parent.pop(path[-1], None)
     return out
 
 

@@ -66,7 +66,7 @@ def test_goal_stand_radius_measures_and_filters_goals_next_to_furniture(tmp_path
     """``goal_stand_radii``: a goal 0.15 m from a wall stands at 0.12 m but not at 0.24 m, a goal in the open at
     the largest radius; with ``goal_stand_radius`` > 0 the set keeps only goals standing at it (each listed in
     index.json with its radius), and a negative radius is refused."""
-    from cat.eval.test_set import GOAL_RADII, goal_stand_radii
+    from cat.envs.episodes import GOAL_RADII, goal_stand_radii
     from cat.terrain.primitives import box
 
     wall = box((1.85, -1.0, 0.0), (1.95, 1.0, 1.5))

@@ -52,6 +52,25 @@ class EpisodeCfg:
     goal_stand_radius: float = 0.0
 
 
+GOAL_RADII = tuple(round(0.04 * k, 2) for k in range(11))  # 0 .. 0.40 m, the steps of goal_stand_radii
+
+
+def goal_stand_radii(scene: Scene, height: float = EpisodeCfg.stand_height, radii=GOAL_RADII) -> np.ndarray:
+    """Per goal of ``scene``, the largest of ``radii`` at which the goal's column is a standing column
+    (``standing_mask``: free to ``height`` within that radius); -1 where it is not free even at the smallest, or
+    outside the grid. A trial ends only with the robot within 0.1 m of its goal touching nothing; at a goal 0.1 m
+    from a wardrobe the G1's arms (0.35-0.4 m out at the default pose) cannot. Shared by the episode sampler
+    (``goal_stand_radius``) and the unseen test set (``cat.eval.test_set``)."""
+    occ, grid = scene.occupancy(), scene.grid()
+    ij = grid.index(np.asarray(scene.goals, dtype=np.float64).reshape(-1, 3))[:, :2]
+    inside = (ij >= 0).all(axis=1) & (ij[:, 0] < occ.shape[0]) & (ij[:, 1] < occ.shape[1])
+    i, j = np.where(inside, ij[:, 0], 0), np.where(inside, ij[:, 1], 0)
+    best = np.full(len(ij), -1.0)
+    for r in sorted(radii):
+        best[inside & standing_mask(occ, grid.voxel, height, r)[i, j]] = r
+    return best
+
+
 class EpisodeError(ValueError):
     """Episode sampling that no scene can serve (the message names the setting)."""
 
@@ -98,14 +117,14 @@ def scene_starts(scene: Scene, cfg: EpisodeCfg, reach: ReachCfg | None = None) -
     walk = walkable(occ, grid, reach)
     # a goal column that the body radius just misses still seeds its walkable neighbourhood
     walk_seed = walk | ndimage.binary_dilation(walk) & ~occ[:, :, 0]
-    goal_ok = standing_mask(occ, grid.voxel, cfg.stand_height, cfg.goal_stand_radius) if cfg.goal_stand_radius else None
+    r = cfg.goal_stand_radius
+    goal_ok = goal_stand_radii(scene, cfg.stand_height, (r,)) >= r if r else np.ones(len(scene.goals), dtype=bool)
     lo, hi = cfg.goal_distance
     centres = np.stack(np.meshgrid(*[grid.axes()[a] for a in (0, 1)], indexing="ij"), axis=-1)
     points, distance = [], []
-    for goal in scene.goals:
+    for goal, ok in zip(scene.goals, goal_ok, strict=True):
         i, j = grid.index(goal[None])[0, :2]
-        inside = 0 <= i < occ.shape[0] and 0 <= j < occ.shape[1]
-        if not inside or (goal_ok is not None and not goal_ok[i, j]):
+        if not (0 <= i < occ.shape[0] and 0 <= j < occ.shape[1]) or not ok:
             points.append(np.zeros((0, 2)))
             distance.append(np.zeros(0))
             continue

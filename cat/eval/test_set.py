@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from cat.envs.episodes import EpisodeCfg
+from cat.envs.episodes import EpisodeCfg, goal_stand_radii
 from cat.terrain import Scene, SceneError, make_indoor
 from cat.terrain.dataset import DONE_FILE, build_fields
 from cat.terrain.voxel import standing_mask
@@ -76,26 +76,6 @@ def start_is_standing(scene: Scene, height: float, radius: float) -> bool:
     i = np.flatnonzero((x >= x0 - 1e-9) & (x <= x1 + 1e-9))
     j = np.flatnonzero((y >= y0 - 1e-9) & (y <= y1 + 1e-9))
     return bool(len(i) and len(j) and stand[np.ix_(i, j)].all())
-
-
-GOAL_RADII = tuple(round(0.04 * k, 2) for k in range(11))  # 0 .. 0.40 m, the steps of goal_stand_radii
-
-
-def goal_stand_radii(scene: Scene, height: float = EpisodeCfg.stand_height, radii=GOAL_RADII) -> np.ndarray:
-    """Per goal, the largest of ``radii`` at which the goal's column is a standing column (``standing_mask``: free
-    to ``height`` within that radius), -1 where it is not free even at 0 (a goal under furniture).
-
-    A trial succeeds only if the robot stands within 0.1 m of its goal touching nothing; at a goal 0.1 m from a
-    wardrobe the G1's arms (0.35-0.4 m out at the default pose) cannot."""
-    grid = scene.grid()
-    occ = scene.occupancy()
-    idx = [tuple(grid.index(np.r_[g[:2], min(float(g[2]), height / 2)])[:2]) for g in scene.goals]
-    best = np.full(len(idx), -1.0)
-    for r in sorted(radii):
-        stand = standing_mask(occ, grid.voxel, height, r)
-        ok = np.array([0 <= i < stand.shape[0] and 0 <= j < stand.shape[1] and stand[i, j] for i, j in idx])
-        best[ok] = r
-    return best
 
 
 def candidate(

@@ -2,7 +2,8 @@
 
 30 indoor crops from a random stream no training run uses, split 15 easy / 15 hard by obstacle density,
 fields precomputed (see ``cat/eval/test_set.py`` and docs/evaluation.md). Deterministic: the same command
-rebuilds the same scenes. Keys: ``out``, ``num_scenes``, ``goals_per_scene``, ``max_seeds``, ``fields``.
+rebuilds the same scenes. Keys: ``out``, ``split`` (``test``, or ``val``: the validation twin from a third stream,
+for choosing checkpoints and arms), ``num_scenes``, ``goals_per_scene``, ``max_seeds``, ``fields``.
 """
 
 from __future__ import annotations

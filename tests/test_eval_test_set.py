@@ -82,3 +82,24 @@ def test_goal_stand_radius_measures_and_filters_goals_next_to_furniture(tmp_path
         assert (goal_stand_radii(Scene.load(tmp_path / "g" / e["folder"])) >= 0.24).all()
     with pytest.raises(ValueError, match="goal_stand_radius must be >= 0"):
         build_test_set(UnseenSetCfg(out=str(tmp_path / "x"), goal_stand_radius=-0.1), progress=False)
+
+
+def test_validation_twin_is_held_out_from_training_and_test(tmp_path):
+    """``split=val`` draws from stream 2: none of its crops is a training (stream 0) or test (stream 1) crop of the
+    same seeds (by mesh), its folders are ``val_<seed>``, its index says so; an unknown split is refused."""
+
+    def _mesh_hash(scene: Scene) -> bytes:
+        return np.round(scene.mesh.vertices, 5).tobytes() + scene.mesh.faces.tobytes()
+
+    index = build_test_set(UnseenSetCfg(out=str(tmp_path / "v"), split="val", num_scenes=2, fields=False), False)
+    meta = json.loads((tmp_path / "v" / "index.json").read_text())
+    assert meta["split"] == "val" and meta["test_stream"] == 2
+    val = [Scene.load(tmp_path / "v" / e["folder"]) for e in index]
+    assert all(e["folder"].split("/")[1].startswith("val_") for e in index)
+    seeds = [e["seed"] for e in index]
+    others = {_mesh_hash(make_indoor(s)) for s in seeds}
+    others |= {_mesh_hash(t) for t in (candidate(s, 4) for s in seeds) if t is not None}
+    assert not others & {_mesh_hash(v) for v in val}
+    with pytest.raises(ValueError, match="split='train'; valid: test, val"):
+        build_test_set(UnseenSetCfg(out=str(tmp_path / "x"), split="train"), progress=False)
+    assert not (tmp_path / "x").exists()

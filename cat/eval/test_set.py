@@ -22,6 +22,10 @@ bank stays small (a 5 × 5 × 2 m field is 25 MB).
 
 Layout: ``<out>/easy/test_<seed>/`` and ``<out>/hard/test_<seed>/`` scene folders with precomputed fields,
 and ``<out>/index.json`` (seed, density, split, goals, rule). Rebuild: ``python scripts/gen_test_set.py``.
+
+A validation twin (``split=val``): the same rules on stream 2 (``[seed, 4241, 2]``), folders ``val_<seed>``. It is
+what a run's checkpoints and a study's arms are chosen on, so the test set reports and never selects
+(docs/evaluation.md, "Choosing on the validation set").
 """
 
 from __future__ import annotations
@@ -43,6 +47,8 @@ from cat.terrain.voxel import standing_mask
 log = logging.getLogger(__name__)
 
 TEST_STREAM = 1
+STREAMS = {"test": TEST_STREAM, "val": 2}
+"""``UnseenSetCfg.split`` -> the ``make_indoor`` stream its scenes come from (training scenes use stream 0)."""
 SPLIT_RULE = (
     "obstacle density = Scene.difficulty of the indoor crop (fraction of its floor a humanoid cannot stand on); "
     "scenes ranked by (density, seed): lower half easy, upper half hard"
@@ -54,6 +60,7 @@ class UnseenSetCfg:
     """``scripts/gen_test_set.py`` options."""
 
     out: str = "data/test_unseen"
+    split: str = "test"  # test (stream 1, Table II) | val (stream 2: choosing checkpoints and arms; STREAMS)
     num_scenes: int = 30  # split in half: easy / hard
     goals_per_scene: int = 4
     max_seeds: int = 200  # give up after this many seeds
@@ -84,29 +91,30 @@ def candidate(
     start_stand_radius: float = 0.0,
     stand_height: float = EpisodeCfg.stand_height,
     goal_stand_radius: float = 0.0,
+    stream: int = TEST_STREAM,
 ) -> Scene | None:
-    """The test-stream indoor crop of ``seed`` with at most ``goals_per_scene`` goals (None: no valid crop, with
+    """The ``stream``'s indoor crop of ``seed`` with at most ``goals_per_scene`` goals (None: no valid crop, with
     ``start_stand_radius`` > 0 a start region that is not all standing columns, or with ``goal_stand_radius`` > 0
     no goal that stands at that radius)."""
     try:
-        scene = make_indoor(seed, stream=TEST_STREAM)
+        scene = make_indoor(seed, stream=stream)
     except SceneError as err:
-        log.info("test seed %d skipped: %s", seed, err)
+        log.info("stream %d seed %d skipped: %s", stream, seed, err)
         return None
     if start_stand_radius > 0 and not start_is_standing(scene, stand_height, start_stand_radius):
-        log.info("test seed %d skipped: its start is within %g m of furniture", seed, start_stand_radius)
+        log.info("stream %d seed %d skipped: its start is within %g m of furniture", stream, seed, start_stand_radius)
         return None
     if goal_stand_radius > 0:
         keep = goal_stand_radii(scene, stand_height, (goal_stand_radius,)) >= goal_stand_radius
         if not keep.any():
-            log.info("test seed %d skipped: no goal stands at %g m", seed, goal_stand_radius)
+            log.info("stream %d seed %d skipped: no goal stands at %g m", stream, seed, goal_stand_radius)
             return None
         scene.goals = scene.goals[keep]
     g = len(scene.goals)
     if g > goals_per_scene:
         keep = np.unique(np.round(np.linspace(0, g - 1, goals_per_scene)).astype(int))
         scene.goals = scene.goals[keep]
-    scene.meta["test_stream"] = TEST_STREAM
+    scene.meta["test_stream"] = stream
     return scene
 
 
@@ -119,6 +127,9 @@ def split(scenes: dict[int, Scene]) -> dict[str, list[int]]:
 
 def build_test_set(cfg: UnseenSetCfg, progress: bool = True) -> list[dict]:
     """Generate (or re-use, when complete and identical) the test set under ``cfg.out``; returns the index."""
+    if cfg.split not in STREAMS:
+        raise ValueError(f"split={cfg.split!r}; valid: {', '.join(STREAMS)}")
+    stream, prefix = STREAMS[cfg.split], cfg.split
     if cfg.num_scenes < 2 or cfg.num_scenes % 2:
         raise ValueError(f"num_scenes must be an even number >= 2, got {cfg.num_scenes}")
     if cfg.goal_stand_radius < 0 or cfg.start_stand_radius < 0:
@@ -127,22 +138,24 @@ def build_test_set(cfg: UnseenSetCfg, progress: bool = True) -> list[dict]:
             f"{cfg.goal_stand_radius}"
         )
     scenes: dict[int, Scene] = {}
-    bar = tqdm(total=cfg.num_scenes, desc="test scenes", unit="scene", disable=not progress)
+    bar = tqdm(total=cfg.num_scenes, desc=f"{cfg.split} scenes", unit="scene", disable=not progress)
     for seed in range(cfg.max_seeds):
         if len(scenes) == cfg.num_scenes:
             break
-        scene = candidate(seed, cfg.goals_per_scene, cfg.start_stand_radius, cfg.stand_height, cfg.goal_stand_radius)
+        scene = candidate(
+            seed, cfg.goals_per_scene, cfg.start_stand_radius, cfg.stand_height, cfg.goal_stand_radius, stream
+        )
         if scene is not None:
             scenes[seed] = scene
             bar.update(1)
     bar.close()
     if len(scenes) < cfg.num_scenes:
-        raise SceneError(f"only {len(scenes)} valid test scenes in {cfg.max_seeds} seeds")
+        raise SceneError(f"only {len(scenes)} valid {cfg.split} scenes in {cfg.max_seeds} seeds")
     out = Path(cfg.out)
     index = []
     for group, seeds in split(scenes).items():
         for seed in seeds:
-            folder = out / group / f"test_{seed:03d}"
+            folder = out / group / f"{prefix}_{seed:03d}"
             _write(scenes[seed], folder, cfg.fields)
             s = scenes[seed]
             index.append({"folder": str(folder.relative_to(out)), "split": group, "seed": seed,
@@ -150,10 +163,10 @@ def build_test_set(cfg: UnseenSetCfg, progress: bool = True) -> list[dict]:
                           "goal_stand_radius": goal_stand_radii(s, cfg.stand_height).tolist()})  # fmt: skip
     for group in ("easy", "hard"):  # folders of an earlier build with other settings
         keep = {Path(e["folder"]).name for e in index if e["split"] == group}
-        for old in sorted((out / group).glob("test_*")):
+        for old in sorted(f for f in (out / group).glob("*_*") if f.name.split("_")[0] in STREAMS):
             if old.name not in keep:
                 shutil.rmtree(old)
-    meta = {"rule": SPLIT_RULE, "test_stream": TEST_STREAM, "config": asdict(cfg), "scenes": index}
+    meta = {"rule": SPLIT_RULE, "test_stream": stream, "split": cfg.split, "config": asdict(cfg), "scenes": index}
     (out / "index.json").write_text(json.dumps(meta, indent=1))
     return index
 

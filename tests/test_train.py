@@ -170,3 +170,24 @@ def test_mixed_precision_runs_the_ppo_update_in_bf16_and_the_rollout_in_fp32(tmp
     assert set(dtypes[:split]) == {torch.float32}  # rollout: values in fp32
     assert set(dtypes[split + 1 :]) == {torch.bfloat16}  # update: bf16 autocast
     assert all(torch.isfinite(torch.tensor(v)) for v in losses[0].values())
+
+
+def test_max_noise_std_clamps_the_learned_std_and_bad_values_are_refused(tmp_path):
+    """algo.max_noise_std reaches rsl_rl's std_range: a policy whose learned std is above it acts with the cap (the
+    sampled actions' spread shows it); 0 leaves the std unbounded; a negative cap is one clear error."""
+    import torch
+
+    from cat.learning.runs import make_env, make_runner
+
+    spreads = {}
+    for cap in (0.0, 0.2):
+        cfg = _small(tmp_path, "algo.init_noise_std=1.0", f"algo.max_noise_std={cap}")
+        env = make_env(cfg, num_envs=4)
+        actor = make_runner(cfg, env, None).alg.actor
+        obs = env.get_observations()
+        torch.manual_seed(0)
+        samples = torch.stack([actor(obs, stochastic_output=True) for _ in range(200)])
+        spreads[cap] = samples.std(dim=0).mean().item()
+    assert 0.9 < spreads[0.0] < 1.1 and 0.17 < spreads[0.2] < 0.23
+    with pytest.raises(ValueError, match="algo.max_noise_std=-1.0: must be >= 0"):
+        make_runner(_small(tmp_path, "algo.max_noise_std=-1.0"), make_env(_small(tmp_path), num_envs=2), None)

@@ -25,7 +25,11 @@ from cat.learning.hydra_cfg import load_config
 # keys that do not change what a run learns (or are the budget, handled apart)
 VOLATILE = ("run_dir", "run_root", "run_name", "max_minutes", "max_iterations", "verbose", "torch_threads")
 VOLATILE += ("init", "resume", "teachers")
-NEUTRAL_DEFAULTS = {("sim", "field_storage"): "float32", ("task", "episodes", "goal_stand_radius"): 0.0}
+NEUTRAL_DEFAULTS = {
+    ("sim", "field_storage"): "float32",
+    ("task", "episodes", "goal_stand_radius"): 0.0,
+    ("algo", "max_noise_std"): 0.0,
+}
 """Keys added after runs were hashed, with the value that reproduces what those runs did: left out of the hash at
 that value, so adding the key does not make every unfinished run "changed" (a key added at its old behaviour)."""
 STATE_FILE = "state.json"

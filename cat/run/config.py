@@ -84,6 +84,9 @@ class AlgoCfg:
     critic_hidden_dims: list[int] = field(default_factory=lambda: [512, 256, 128])
     activation: str = "elu"
     init_noise_std: float = 0.3  # actions are increments of PD targets (0.5 rad per unit): keep early noise small
+    # > 0: the learned action std is clamped to at most this (rsl_rl's std_range); 0: unbounded, as every run before
+    # 2026-12-04. The hybrid teacher's ankle stds had grown to 2-5.6 (1-2.8 rad of target noise per step)
+    max_noise_std: float = 0.0
     obs_normalization: bool = True
     # iterations at the start of the run in which PPO trains the critic only (actor frozen, fixed rate): a new
     # critic under a trained actor (init= a distilled student, cat/learning/finetune.py) first learns its values
@@ -185,7 +188,7 @@ def runner_cfg(algo: AlgoCfg, env_groups: Iterable[str] | None = None) -> dict[s
             "hidden_dims": list(algo.actor_hidden_dims),
             "activation": algo.activation,
             "obs_normalization": algo.obs_normalization,
-            "distribution_cfg": {"class_name": "GaussianDistribution", "init_std": algo.init_noise_std},
+            "distribution_cfg": _distribution_cfg(algo),
         },
         "critic": {
             "class_name": "MLPModel",
@@ -194,6 +197,16 @@ def runner_cfg(algo: AlgoCfg, env_groups: Iterable[str] | None = None) -> dict[s
             "obs_normalization": algo.obs_normalization,
         },
     }
+
+
+def _distribution_cfg(algo: AlgoCfg) -> dict[str, Any]:
+    """The actor's Gaussian: its initial std and, with ``max_noise_std`` > 0, the clamp on the learned std."""
+    if algo.max_noise_std < 0:
+        raise ValueError(f"algo.max_noise_std={algo.max_noise_std}: must be >= 0 (0 = unbounded)")
+    cfg: dict[str, Any] = {"class_name": "GaussianDistribution", "init_std": algo.init_noise_std}
+    if algo.max_noise_std > 0:
+        cfg["std_range"] = (1e-6, algo.max_noise_std)
+    return cfg
 
 
 def _critic_warmup(algo: AlgoCfg) -> dict[str, Any]:

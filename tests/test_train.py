@@ -174,10 +174,11 @@ def test_mixed_precision_runs_the_ppo_update_in_bf16_and_the_rollout_in_fp32(tmp
 
 def test_max_noise_std_clamps_the_learned_std_and_bad_values_are_refused(tmp_path):
     """algo.max_noise_std reaches rsl_rl's std_range: a policy whose learned std is above it acts with the cap (the
-    sampled actions' spread shows it); 0 leaves the std unbounded; a negative cap is one clear error."""
+    sampled actions' spread shows it); 0 leaves the std unbounded; a negative cap is one clear error, before any
+    env is built."""
     import torch
 
-    from cat.learning.runs import make_env, make_runner
+    from cat.learning.runs import make_env, make_runner, validate_train_cfg
 
     spreads = {}
     for cap in (0.0, 0.2):
@@ -190,4 +191,4 @@ def test_max_noise_std_clamps_the_learned_std_and_bad_values_are_refused(tmp_pat
         spreads[cap] = samples.std(dim=0).mean().item()
     assert 0.9 < spreads[0.0] < 1.1 and 0.17 < spreads[0.2] < 0.23
     with pytest.raises(ValueError, match="algo.max_noise_std=-1.0: must be >= 0"):
-        make_runner(_small(tmp_path, "algo.max_noise_std=-1.0"), make_env(_small(tmp_path), num_envs=2), None)
+        validate_train_cfg(_small(tmp_path, "algo.max_noise_std=-1.0"))

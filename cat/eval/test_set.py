@@ -129,7 +129,7 @@ def build_test_set(cfg: UnseenSetCfg, progress: bool = True) -> list[dict]:
     """Generate (or re-use, when complete and identical) the test set under ``cfg.out``; returns the index."""
     if cfg.split not in STREAMS:
         raise ValueError(f"split={cfg.split!r}; valid: {', '.join(STREAMS)}")
-    stream, prefix = STREAMS[cfg.split], cfg.split
+    stream = STREAMS[cfg.split]
     if cfg.num_scenes < 2 or cfg.num_scenes % 2:
         raise ValueError(f"num_scenes must be an even number >= 2, got {cfg.num_scenes}")
     if cfg.goal_stand_radius < 0 or cfg.start_stand_radius < 0:
@@ -155,7 +155,7 @@ def build_test_set(cfg: UnseenSetCfg, progress: bool = True) -> list[dict]:
     index = []
     for group, seeds in split(scenes).items():
         for seed in seeds:
-            folder = out / group / f"{prefix}_{seed:03d}"
+            folder = out / group / f"{cfg.split}_{seed:03d}"
             _write(scenes[seed], folder, cfg.fields)
             s = scenes[seed]
             index.append({"folder": str(folder.relative_to(out)), "split": group, "seed": seed,

@@ -133,6 +133,7 @@ def validate_train_cfg(cfg: TrainCfg) -> None:
         "max_minutes": cfg.max_minutes,
         "torch_threads": cfg.torch_threads,
         "algo.critic_warmup_iterations": cfg.algo.critic_warmup_iterations,
+        "algo.max_noise_std": cfg.algo.max_noise_std,
     }
     for key, value in nonnegative.items():
         if value < 0:

@@ -200,9 +200,8 @@ def runner_cfg(algo: AlgoCfg, env_groups: Iterable[str] | None = None) -> dict[s
 
 
 def _distribution_cfg(algo: AlgoCfg) -> dict[str, Any]:
-    """The actor's Gaussian: its initial std and, with ``max_noise_std`` > 0, the clamp on the learned std."""
-    if algo.max_noise_std < 0:
-        raise ValueError(f"algo.max_noise_std={algo.max_noise_std}: must be >= 0 (0 = unbounded)")
+    """The actor's Gaussian: its initial std and, with ``max_noise_std`` > 0, the clamp on the learned std
+    (``validate_train_cfg`` refuses a negative one)."""
     cfg: dict[str, Any] = {"class_name": "GaussianDistribution", "init_std": algo.init_noise_std}
     if algo.max_noise_std > 0:
         cfg["std_range"] = (1e-6, algo.max_noise_std)

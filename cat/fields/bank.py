@@ -34,7 +34,7 @@ from cat.fields.config import FieldCfg
 from cat.fields.field import Field
 from cat.fields.grid import Grid
 from cat.fields.humanoid_pf import humanoid_pf
-from cat.fields.store import SceneFields
+from cat.fields.store import SceneFields, check_scene_fields
 
 SCENE_CHANNELS = ("sdf", "gx", "gy", "gz")
 GOAL_CHANNELS = ("fx", "fy", "fz")
@@ -243,20 +243,28 @@ class FieldBank:
         return self.goal_data[o : o + grid.num_voxels * c].view(*grid.shape, c)
 
     def set_scene(self, s: int, data: SceneFields | list[Field], offset=(0.0, 0.0, 0.0)) -> None:
-        """Write scene ``s``'s d, ∇d and every goal's F; its grid origin and goals are shifted by ``offset``."""
-        sf = data if isinstance(data, SceneFields) else SceneFields.from_fields(data)
+        """Write scene ``s``'s d, ∇d and every goal's F; its grid origin and goals are shifted by ``offset``.
+
+        Goal fields (``list[Field]``) are copied straight from their channels, without a ``SceneFields`` in
+        between (the live perception loop fills a bank 10 times a second)."""
+        if isinstance(data, SceneFields):
+            grid, goals, sdf_grad, forces = data.grid, data.goals, data.sdf_grad, list(data.force)
+        else:
+            f0 = check_scene_fields(data)
+            grid, goals, sdf_grad = f0.grid, np.stack([f.goal for f in data]), f0.data[..., 3:7]
+            forces = [f.force for f in data]
         lay = self.layouts[s]
-        if sf.grid.shape != lay.grid.shape or not np.isclose(sf.grid.voxel, lay.grid.voxel):
-            raise ValueError(f"scene {s}: fields on grid {sf.grid.shape}/{sf.grid.voxel}, bank expects {lay.grid}")
-        if sf.num_goals != lay.num_goals:
-            raise ValueError(f"scene {s}: {sf.num_goals} goal fields, bank expects {lay.num_goals}")
+        if grid.shape != lay.grid.shape or not np.isclose(grid.voxel, lay.grid.voxel):
+            raise ValueError(f"scene {s}: fields on grid {grid.shape}/{grid.voxel}, bank expects {lay.grid}")
+        if len(forces) != lay.num_goals:
+            raise ValueError(f"scene {s}: {len(forces)} goal fields, bank expects {lay.num_goals}")
         off = np.asarray(offset, dtype=np.float64).reshape(3)
-        self._scene_view(s).copy_(torch.from_numpy(sf.sdf_grad))
-        for g, i in enumerate(self.fields_of(s)):
-            self._field_view(i).copy_(self.storage.encode_force(torch.from_numpy(sf.force[g])))
+        self._scene_view(s).copy_(torch.from_numpy(sdf_grad))
+        for force, i in zip(forces, self.fields_of(s), strict=True):
+            self._field_view(i).copy_(self.storage.encode_force(torch.from_numpy(force)))
         fs = self.fields_of(s)
-        self.goals[fs.start : fs.stop] = torch.as_tensor(sf.goals + off, dtype=torch.float32, device=self.device)
-        self.scene_origin[s] = torch.as_tensor(np.asarray(sf.grid.origin) + off, dtype=torch.float32)
+        self.goals[fs.start : fs.stop] = torch.as_tensor(goals + off, dtype=torch.float32, device=self.device)
+        self.scene_origin[s] = torch.as_tensor(np.asarray(grid.origin) + off, dtype=torch.float32)
         self._unfilled.discard(s)
 
     def set_field(self, i: int, f: Field, offset=(0.0, 0.0, 0.0)) -> None:
@@ -290,9 +298,13 @@ class FieldBank:
         cls, scenes: Sequence[SceneFields | list[Field]], dtype: str = "float32", device="cpu", num_threads=None
     ) -> FieldBank:
         """One bank scene per entry (a ``SceneFields`` or the list of one scene's goal fields)."""
-        sfs = [s if isinstance(s, SceneFields) else SceneFields.from_fields(s) for s in scenes]
-        layouts = [SceneLayout(sf.grid, sf.num_goals) for sf in sfs]
-        return cls.build(layouts, lambda s: sfs[s], dtype=dtype, device=device, num_threads=num_threads)
+        layouts = [
+            SceneLayout(s.grid, s.num_goals)
+            if isinstance(s, SceneFields)
+            else SceneLayout(check_scene_fields(s).grid, len(s))
+            for s in scenes
+        ]
+        return cls.build(layouts, lambda s: scenes[s], dtype=dtype, device=device, num_threads=num_threads)
 
     @classmethod
     def from_fields(cls, fields: list[Field], dtype: str = "float32", device="cpu", num_threads=None) -> FieldBank:

@@ -23,6 +23,19 @@ STORE_FILE = "humanoid_pf.npz"
 STORAGE_DTYPES = {"float32": np.float32, "float16": np.float16}
 
 
+def check_scene_fields(fields: list[Field]) -> Field:
+    """The first of one scene's goal fields, after checking they share a grid and a config."""
+    if not fields:
+        raise ValueError("SceneFields needs at least one field")
+    f0 = fields[0]
+    for f in fields[1:]:
+        if f.grid != f0.grid:
+            raise ValueError(f"fields of one scene must share a grid: {f.grid} != {f0.grid}")
+        if f.cfg != f0.cfg:
+            raise ValueError("fields of one scene must share a FieldCfg")
+    return f0
+
+
 @dataclass
 class SceneFields:
     """HumanoidPF of one scene for several goals, reduced to what the bank queries."""
@@ -51,14 +64,7 @@ class SceneFields:
     @classmethod
     def from_fields(cls, fields: list[Field]) -> SceneFields:
         """Fields of one scene (same grid and config, one per goal; d, ∇d taken from the first)."""
-        if not fields:
-            raise ValueError("SceneFields needs at least one field")
-        f0 = fields[0]
-        for f in fields[1:]:
-            if f.grid != f0.grid:
-                raise ValueError(f"fields of one scene must share a grid: {f.grid} != {f0.grid}")
-            if f.cfg != f0.cfg:
-                raise ValueError("fields of one scene must share a FieldCfg")
+        f0 = check_scene_fields(fields)
         force = np.empty((len(fields), *f0.grid.shape, 3), dtype=np.float32)
         for i, f in enumerate(fields):
             force[i] = f.force

@@ -1,6 +1,7 @@
-"""A sitting's budget (``max_minutes=``) with the sequential launcher: a stage's runs go one at a time, each given
-what the sitting has left when it starts, so one sitting of experiment=table1 (ten runs in one stage) stops on
-time instead of giving every run the whole budget."""
+"""A sitting's budget (``max_minutes=``): a stage's runs go in waves as wide as the launcher runs at once on this
+machine (the sequential launcher: one; joblib: ``n_jobs``), each wave given what the sitting has left when it
+starts, so one sitting of experiment=table1 (ten runs in one stage) stops on time instead of giving every run the
+whole budget."""
 
 from __future__ import annotations
 
@@ -33,3 +34,27 @@ def test_each_sequential_run_gets_what_the_sitting_has_left(tmp_path, caplog):
     assert given["a"] <= 30 and given["b"] < given["a"]  # b started after a ran: less of the sitting was left
     assert (tmp_path / "exps/sit/runs/a/seed0/model_0.pt").is_file()
     assert (tmp_path / "exps/sit/runs/b/seed1/model_0.pt").is_file()
+
+
+def _given(caplog) -> dict[str, float]:
+    return {
+        m.group(1): float(m.group(2))
+        for r in caplog.records
+        if (m := re.match(r"stage 0: (\w+)@\d: .* max_minutes=([\d.]+)", r.getMessage()))
+    }
+
+
+def test_joblib_waves_of_n_jobs_each_get_what_is_left(tmp_path, caplog):
+    exp = tmp_path / "wave.yaml"
+    cells = {c: {"task": "flat", "iterations": 1} for c in ("a", "b", "c")}
+    exp.write_text(yaml.safe_dump({"common": COMMON, "cells": cells}))
+    mod = load_script(REPO / "scripts" / "experiment.py")
+    args = [f"experiment={exp}", f"root={tmp_path / 'exps'}", "max_minutes=30", "hydra/launcher=joblib"]
+    with caplog.at_level(logging.INFO):
+        code = mod.main([*args, "hydra.launcher.n_jobs=2"])
+    assert code == 0
+    given = _given(caplog)
+    assert set(given) == {"a", "b", "c"}
+    assert given["a"] == given["b"] <= 30  # the first wave: launched together, the same budget
+    assert given["c"] < given["a"]  # the second wave started after the first ran
+    assert all((tmp_path / f"exps/wave/runs/{c}/seed0/model_0.pt").is_file() for c in cells)

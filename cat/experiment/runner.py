@@ -5,6 +5,7 @@ nothing."""
 from __future__ import annotations
 
 import logging
+import os
 import shlex
 import shutil
 import time
@@ -148,25 +149,39 @@ class Runner:
 
         return latest_checkpoint(unit.run_dir)
 
-    def _sequential(self) -> bool:
-        """hydra's ``basic`` launcher (the default) runs a stage's jobs one after another."""
-        chosen = [a.split("=", 1)[1] for a in self.hydra_args if a.split("=", 1)[0].lstrip("+") == "hydra/launcher"]
-        return not chosen or chosen[-1] == "basic"
+    def _hydra_arg(self, key: str) -> str | None:
+        """The last value given to hydra option ``key`` (``hydra/launcher``, ``hydra.launcher.n_jobs``), if any."""
+        given = [a.split("=", 1)[1] for a in self.hydra_args if a.split("=", 1)[0].lstrip("+") == key]
+        return given[-1] if given else None
+
+    def _width(self) -> int | None:
+        """How many of a stage's jobs run at once on this machine: 1 for hydra's ``basic`` launcher (the default),
+        ``n_jobs`` for ``joblib`` (all cores when unset or negative); None for launchers that start every job at
+        once (``submitit_*``, ``ray``: a cluster's width is not this machine's)."""
+        launcher = self._hydra_arg("hydra/launcher") or "basic"
+        if launcher == "basic":
+            return 1
+        if launcher != "joblib":
+            return None
+        n = int(self._hydra_arg("hydra.launcher.n_jobs") or -1)
+        return n if n > 0 else max(1, (os.cpu_count() or 1) + 1 + n)  # joblib: -1 = all cores, -2 = all but one
 
     def _train_stage(self, k: int, units: list[Unit], left: float | None) -> None:
-        """Launch a stage's runs. With a sitting budget and the sequential launcher, one run at a time, each given
-        what the sitting has left when it starts (launched together, each would get the whole budget); runs not
-        reached are left for the next sitting."""
-        if left is None or not self._sequential():
+        """Launch a stage's runs. With a sitting budget and a launcher that runs ``w`` jobs at a time on this
+        machine (``basic``: 1, ``joblib``: ``n_jobs``), the runs go in waves of ``w``, each wave given what the
+        sitting has left when it starts (launched together, a later wave would get the whole budget again); runs
+        not reached are left for the next sitting."""
+        width = self._width()
+        if left is None or width is None or width >= len(units):
             self._launch_units(k, units, left)
             return
-        for n, unit in enumerate(units):
+        for n in range(0, len(units), width):
             left = self.minutes_left()
             if left is not None and left <= 0:
                 log.info("max_minutes=%g spent: %s left for the next sitting", self.cfg.max_minutes,
                          ", ".join(u.key for u in units[n:]))  # fmt: skip
                 return
-            self._launch_units(k, [unit], left)
+            self._launch_units(k, units[n : n + width], left)
 
     def _launch_units(self, k: int, units: list[Unit], left: float | None) -> None:
         jobs = [self._job(u, left) for u in units]

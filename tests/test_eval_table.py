@@ -297,6 +297,18 @@ def test_bad_input_names_the_problem_and_writes_nothing(tmp_path, checkpoints, s
     assert code == 2 and "unknown key 'outt'; did you mean out?" in err
 
 
+def test_a_column_of_linked_scene_folders_is_accepted(tmp_path, checkpoints, scene_dirs):
+    """A Table II column may be a folder of symbolic links to scene folders (a split of a generated set, as
+    experiment=table2's held-out procedural columns): the manifest finds them as the runner does."""
+    linked = tmp_path / "linked"
+    linked.mkdir()
+    (linked / "s0").symlink_to(scene_dirs["easy"] / "s0", target_is_directory=True)
+    man = load_manifest(
+        _manifest(tmp_path / "m.yaml", methods={"A": [str(checkpoints[0])]}, table2={"easy": str(linked)})
+    )
+    assert man.table2 == {"easy": str(linked)}
+
+
 def test_failure_during_evaluation_leaves_no_output(tmp_path, monkeypatch, caplog, scene_dirs):
     """An error after some trials ran (here: injected into the second column's run) writes nothing."""
     man = _manifest(tmp_path / "m.yaml", methods={"Hold": ["hold"]}, table2={k: str(v) for k, v in scene_dirs.items()})

@@ -33,6 +33,7 @@ import yaml
 
 from cat.checkpoint_io import CheckpointError
 from cat.envs.obs_groups import groups_layout
+from cat.envs.scene_set import scene_folders
 from cat.run.config import TrainCfg, policy_model
 from cat.run.config_file import load_run_config
 from cat.terrain import TYPICAL_KINDS
@@ -202,7 +203,7 @@ def _table2(raw) -> dict[str, str]:
         root = Path(str(folder))
         if not root.is_dir():
             raise ManifestError(f"table2 {name!r}: scene folder not found: {root}")
-        if not any(root.rglob("scene.json")):
+        if not scene_folders(root):  # the runner's own search (it follows symbolic links)
             raise ManifestError(f"table2 {name!r}: no scenes (scene.json) under {root}")
         out[str(name)] = str(root)
     return out

@@ -17,6 +17,15 @@ REPO = Path(__file__).resolve().parents[1]
 COMMON = ["sim=mujoco", "num_envs=4", "algo.num_steps_per_env=4", "algo.save_interval=1"]
 
 
+def _given(caplog) -> dict[str, float]:
+    """The sitting budget each stage-0 run was launched with, by cell (from the runner's log)."""
+    return {
+        m.group(1): float(m.group(2))
+        for r in caplog.records
+        if (m := re.match(r"stage 0: (\w+)@\d: .* max_minutes=([\d.]+)", r.getMessage()))
+    }
+
+
 def test_each_sequential_run_gets_what_the_sitting_has_left(tmp_path, caplog):
     exp = tmp_path / "sit.yaml"
     cells = {"a": {"task": "flat", "iterations": 1}, "b": {"task": "flat", "iterations": 1, "seeds": [1]}}
@@ -25,23 +34,11 @@ def test_each_sequential_run_gets_what_the_sitting_has_left(tmp_path, caplog):
     with caplog.at_level(logging.INFO):
         code = mod.main([f"experiment={exp}", f"root={tmp_path / 'exps'}", "max_minutes=30"])
     assert code == 0
-    given = {
-        m.group(1): float(m.group(2))
-        for r in caplog.records
-        if (m := re.match(r"stage 0: (\w+)@\d: .* max_minutes=([\d.]+)", r.getMessage()))
-    }
+    given = _given(caplog)
     assert set(given) == {"a", "b"}
     assert given["a"] <= 30 and given["b"] < given["a"]  # b started after a ran: less of the sitting was left
     assert (tmp_path / "exps/sit/runs/a/seed0/model_0.pt").is_file()
     assert (tmp_path / "exps/sit/runs/b/seed1/model_0.pt").is_file()
-
-
-def _given(caplog) -> dict[str, float]:
-    return {
-        m.group(1): float(m.group(2))
-        for r in caplog.records
-        if (m := re.match(r"stage 0: (\w+)@\d: .* max_minutes=([\d.]+)", r.getMessage()))
-    }
 
 
 def test_joblib_waves_of_n_jobs_each_get_what_is_left(tmp_path, caplog):

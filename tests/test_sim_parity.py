@@ -43,6 +43,10 @@ from cat.envs.sim.warp_backend import WarpBackend, resolve_device
 log = logging.getLogger(__name__)
 
 WARP_DEVICE = os.environ.get("CAT_WARP_TEST_DEVICE", "cpu")  # cuda:0 on a lent GPU (scripts/gpu/check.sh)
+BITWISE = not WARP_DEVICE.startswith("cuda")
+"""Warp's CPU device runs kernels in a fixed order, so equal launches give equal bits. On CUDA mujoco_warp
+accumulates with float atomics whose order varies between launches: the last bit differs (H200, 2026-12-04:
+max 1.5e-8 on 20 of 72 state values after 10 steps, graph replay against eager launches)."""
 
 STEPS = 50
 OBSTACLE_X = 5.0
@@ -192,7 +196,7 @@ def test_cuda_request_without_gpu_names_the_fix():
 
 
 def test_graph_replay_matches_eager_launches(model, robot_cfg):
-    """Captured step / forward (Warp's CPU graph replay) == launching mujoco_warp eagerly, bitwise."""
+    """Captured step / forward (graph replay) == launching mujoco_warp eagerly (bitwise on Warp's CPU device)."""
     n = 2
     qpos, qvel = initial_states(robot_cfg, n)
     qpos[0, 0] = OBSTACLE_X  # contacts with the box and the mesh
@@ -208,7 +212,7 @@ def test_graph_replay_matches_eager_launches(model, robot_cfg):
                 b.reset(torch.tensor([1]), qpos[1:], qvel[1:])
             b.step(u)
         for ta, tb in zip(state(backends[0]), state(backends[1]), strict=True):
-            assert torch.equal(ta, tb)
+            assert_same(ta, tb)
 
 
 @pytest.mark.parametrize("scenario", ["floor", "obstacle"])
@@ -256,8 +260,8 @@ def test_reset_subset_leaves_other_worlds_untouched(model, robot_cfg):
     for t, t0 in zip((a.qpos, a.qvel, a.sensordata, wp_time(a)), before, strict=True):
         assert torch.equal(t[keep], t0[keep])
     assert (wp_time(a)[ids] == 0).all()
-    torch.testing.assert_close(a.qpos[ids], new_qpos.float())
-    torch.testing.assert_close(a.qvel[ids], new_qvel.float())
+    torch.testing.assert_close(a.qpos[ids].cpu(), new_qpos.float())
+    torch.testing.assert_close(a.qvel[ids].cpu(), new_qvel.float())
 
     # the reset worlds' sensors match MuJoCo C's mj_resetData + mj_forward on the same state
     ref = MujocoBackend(model, 2, robot_cfg.decimation)
@@ -265,18 +269,26 @@ def test_reset_subset_leaves_other_worlds_untouched(model, robot_cfg):
     cols = sensor_columns(model)
     for group, tol in (("pos", 1e-4), ("vel", 1e-3), ("acc", 0.05), ("count", 0.0)):
         c = torch.as_tensor(cols[group])
-        torch.testing.assert_close(a.sensordata[ids][:, c].double(), ref.sensordata[:, c], atol=tol, rtol=0)
+        torch.testing.assert_close(a.sensordata[ids][:, c].double().cpu(), ref.sensordata[:, c], atol=tol, rtol=0)
 
     # a fresh backend reset to the same states: the reset worlds carry no hidden state over (warmstart, ...)
     fresh = WarpBackend(model, n, robot_cfg.decimation, device=WARP_DEVICE)
     fresh.reset(torch.arange(n), a.qpos.clone(), a.qvel.clone())
-    assert torch.equal(fresh.sensordata[ids], a.sensordata[ids])
+    assert_same(fresh.sensordata[ids], a.sensordata[ids])
     for u in ctrl[6:]:
         for backend in (a, twin, fresh):
             backend.step(u)
         for ta, tb, tc in zip(state(a), state(twin), state(fresh), strict=True):
-            assert torch.equal(ta[keep], tb[keep])  # kept worlds go on as if nothing happened
-            assert torch.equal(ta[ids], tc[ids])  # reset worlds behave as freshly reset ones
+            assert_same(ta[keep], tb[keep])  # kept worlds go on as if nothing happened
+            assert_same(ta[ids], tc[ids])  # reset worlds behave as freshly reset ones
+
+
+def assert_same(a: torch.Tensor, b: torch.Tensor) -> None:
+    """Equal bits on Warp's CPU device; equal to float32 rounding on CUDA (see ``BITWISE``)."""
+    if BITWISE:
+        assert torch.equal(a, b)
+    else:
+        torch.testing.assert_close(a, b, atol=1e-6, rtol=1e-6)
 
 
 def state(backend: WarpBackend) -> tuple[torch.Tensor, ...]:

@@ -37,7 +37,7 @@ step info 60 bash -c 'nvidia-smi -L; python3 -c "import torch, warp, mujoco, muj
 print(\"torch\", torch.__version__, torch.cuda.get_device_name(0)); print(\"warp\", warp.__version__, \
 warp.get_cuda_device_count(), \"cuda devices\"); print(\"mujoco\", mujoco.__version__)"'
 # CUDA against CPU: bank query, warp envs with per-world scenes, and the backend parity suite on CUDA
-step tests 240 env CAT_WARP_TEST_DEVICE=cuda:0 python3 -m pytest -q -p no:cacheprovider tests/test_cuda.py \
+step tests 360 env CAT_WARP_TEST_DEVICE=cuda:0 python3 -m pytest -q -p no:cacheprovider tests/test_cuda.py \
   tests/test_sim_parity.py tests/test_fields_bank.py tests/test_warp_slots.py
 # issue 11's query target: 4096 envs x 13 links <= 2 ms (8 fields, then the 355-scene x 12-goal bank)
 step fields 180 python3 scripts/bench.py fields --device cuda:0
@@ -46,5 +46,8 @@ step scale_query 300 python3 scripts/bench.py scale --device cuda:0 --no-env --p
 step sim 300 python3 scripts/bench.py sim --backends warp --device cuda:0 --envs 1024 4096 16384
 # issue 11's ratio on the GPU path: 355 scenes, each world its own (geom slots), against flat, 1024 envs
 step scale_env 420 python3 scripts/bench.py scale --device cuda:0 --sim warp --per-world --physics-scenes 0
+# the same at 16k envs, where the flat task fills the GPU (2026-12-04: 1024 envs gave 0.72, the GPU far from full)
+step scale_env16k 420 python3 scripts/bench.py scale --device cuda:0 --sim warp --per-world --physics-scenes 0 \
+  --envs 16384
 echo "failed steps: $fails"
 exit "$fails"

@@ -78,7 +78,7 @@ def crop_house(house: House, center_xy: np.ndarray, cfg: IndoorCfg) -> tuple[Sce
             "remeshed": not closed,
         },
     )
-    scene._occ[cfg.voxel] = occ
+    scene.set_occupancy(occ, cfg.voxel)
     return scene, floor
 
 

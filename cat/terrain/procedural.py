@@ -175,7 +175,7 @@ def make_procedural(
         seed=int(seed),
         meta={"family": "procedural", "attempt": attempt, "free_volume": float(1 - occ.mean())},
     )
-    scene._occ[grid.voxel] = occ
+    scene.set_occupancy(occ, grid.voxel)
     return scene
 
 

@@ -40,6 +40,10 @@ class Scene:
 
     ``bounds`` is (2, 3) min/max corners; ``start`` (3,), ``goals`` (G, 3); ``start_region`` (2, 2) xy
     min/max corners of the area the env may spawn in; ``meta`` holds generator parameters.
+
+    Memory (a training set holds hundreds): a loaded scene reads its mesh on first use (``load``; field-judged
+    training never needs it, and a parsed mesh with trimesh's bookkeeping is ~2 MiB), and the occupancy is cached
+    bit-packed (1/8 of a bool grid), each ``occupancy()`` call unpacking a fresh array (~1 ms).
     """
 
     mesh: trimesh.Trimesh
@@ -51,8 +55,17 @@ class Scene:
     seed: int | None = None
     start_region: np.ndarray | None = None
     meta: dict = field(default_factory=dict)
-    _occ: dict = field(default_factory=dict, repr=False, compare=False)
+    _occ: dict = field(default_factory=dict, repr=False, compare=False)  # voxel -> (packed bits, shape)
     _unseen: dict = field(default_factory=dict, repr=False, compare=False)
+    _mesh_file: Path | None = field(default=None, repr=False, compare=False)  # read on first use of ``mesh``
+
+    def __getattr__(self, name: str):
+        """Only reached for an attribute not set: ``mesh`` of a loaded scene before its first use."""
+        path = self.__dict__.get("_mesh_file")
+        if name == "mesh" and path is not None:
+            self.mesh = load_mesh(path, allow_empty=True)
+            return self.mesh
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
 
     def __post_init__(self) -> None:
         self.bounds = np.asarray(self.bounds, dtype=np.float64).reshape(2, 3)
@@ -96,11 +109,19 @@ class Scene:
         return GridSpec.from_bounds(self.bounds, voxel)
 
     def occupancy(self, voxel: float = VOXEL) -> np.ndarray:
-        """Boolean occupancy on ``grid(voxel)`` (cached)."""
+        """Boolean occupancy on ``grid(voxel)`` (cached bit-packed; a fresh array each call)."""
         if voxel not in self._occ:
             self._unseen[voxel] = []
-            self._occ[voxel] = occupancy(self.mesh, self.grid(voxel), self._unseen[voxel])
-        return self._occ[voxel]
+            self.set_occupancy(occupancy(self.mesh, self.grid(voxel), self._unseen[voxel]), voxel)
+        bits, shape = self._occ[voxel]
+        return np.unpackbits(bits, count=int(np.prod(shape))).view(bool).reshape(shape)
+
+    def set_occupancy(self, occ: np.ndarray, voxel: float = VOXEL) -> None:
+        """Cache ``occ`` (a bool grid of ``grid(voxel)``'s shape, e.g. the one a generator voxelised)."""
+        shape = self.grid(voxel).shape
+        if occ.shape != tuple(shape):
+            raise SceneError(f"occupancy of shape {occ.shape} does not match the scene grid {tuple(shape)}")
+        self._occ[voxel] = (np.packbits(np.asarray(occ, dtype=bool).ravel()), tuple(shape))
 
     def unseen_parts(self, voxel: float = VOXEL) -> list[np.ndarray]:
         """Bounds (2, 3) of the obstacle parts that hold no voxel centre of ``grid(voxel)``: the physics collides
@@ -174,10 +195,10 @@ class Scene:
         if raw.get("format_version") != FORMAT_VERSION:
             raise SceneError(f"{path}: unsupported format_version {raw.get('format_version')!r}")
         mesh_path = folder / raw.get("mesh", MESH_FILE)
-        mesh = load_mesh(mesh_path, allow_empty=True)
+        check_mesh_path(mesh_path)  # read on first use (class docstring); a missing file fails here
         try:
             scene = cls(
-                mesh=mesh,
+                mesh=None,
                 bounds=np.array(raw["bounds"]),
                 start=np.array(raw["start"]),
                 goals=np.array(raw["goals"]),
@@ -189,6 +210,8 @@ class Scene:
             )
         except (KeyError, ValueError, TypeError) as err:
             raise SceneError(f"{path}: bad scene description ({err!r})") from err
+        del scene.mesh  # reads mesh_path on first use
+        scene._mesh_file = mesh_path
         scene._load_occupancy(folder / OCC_FILE)
         return scene
 
@@ -202,7 +225,10 @@ class Scene:
             if shape != self.grid().shape:
                 log.warning("%s: shape %s does not match the scene grid; ignored", path, shape)
                 return
-            self._occ[VOXEL] = np.unpackbits(data["bits"], count=int(np.prod(shape))).astype(bool).reshape(shape)
+            bits = np.asarray(data["bits"], dtype=np.uint8)
+            if bits.size != (int(np.prod(shape)) + 7) // 8:
+                raise ValueError(f"{bits.size} bytes of bits for a grid of shape {shape}")
+            self._occ[VOXEL] = (bits, shape)
         except (OSError, KeyError, ValueError) as err:
             log.warning("%s: unreadable occupancy cache (%s); re-voxelising the mesh", path, err)
 
@@ -269,13 +295,18 @@ def validate_mesh(mesh: trimesh.Trimesh, source: str, allow_empty: bool = False)
     return mesh
 
 
-def load_mesh(path: str | os.PathLike, allow_empty: bool = False) -> trimesh.Trimesh:
-    """Load one triangle mesh (scenes are flattened), with clear errors naming the file."""
-    path = Path(path)
+def check_mesh_path(path: Path) -> None:
+    """A mesh file that exists, in a format we read (its content is checked when it is read)."""
     if not path.is_file():
         raise SceneError(f"{path}: mesh file not found")
     if path.suffix.lower() not in MESH_SUFFIXES:
         raise SceneError(f"{path}: unsupported mesh format {path.suffix!r} (use one of {MESH_SUFFIXES})")
+
+
+def load_mesh(path: str | os.PathLike, allow_empty: bool = False) -> trimesh.Trimesh:
+    """Load one triangle mesh (scenes are flattened), with clear errors naming the file."""
+    path = Path(path)
+    check_mesh_path(path)
     try:
         loaded = trimesh.load(str(path), force="mesh", process=False)
     except Exception as err:  # trimesh raises many types on garbage input

@@ -210,3 +210,30 @@ def test_perlin_noise():
     assert np.abs(np.diff(v, axis=1)).max() < 0.2
     q = Perlin2D(np.random.default_rng(0), frequency=4.0)
     np.testing.assert_array_equal(q(x, y), v)
+
+
+def test_loaded_scene_reads_its_mesh_on_first_use(tmp_path):
+    """A training set of hundreds of scenes keeps no meshes it never uses; a bad file still names itself."""
+    scene = _pillar_scene()
+    scene.save(tmp_path / "s")
+    loaded = Scene.load(tmp_path / "s")
+    assert "mesh" not in loaded.__dict__  # not read yet: the occupancy came from its cache
+    np.testing.assert_array_equal(loaded.occupancy(), scene.occupancy())
+    assert "mesh" not in loaded.__dict__
+    assert len(loaded.mesh.faces) == len(scene.mesh.faces) and "mesh" in loaded.__dict__
+    # the cache is bit-packed; each call hands out its own array
+    bits, shape = loaded._occ[0.04]
+    assert bits.dtype == np.uint8 and bits.size == (np.prod(shape) + 7) // 8
+    a = loaded.occupancy()
+    a[:] = True
+    assert not loaded.occupancy().all()
+    with pytest.raises(SceneError, match="does not match the scene grid"):
+        loaded.set_occupancy(np.zeros((3, 3, 3), dtype=bool))
+    # a corrupt mesh is found when it is read, and the error names the file
+    (tmp_path / "s" / "mesh.ply").write_bytes(b"\x00\x01garbage")
+    lazy = Scene.load(tmp_path / "s")
+    with pytest.raises(SceneError, match="mesh.ply"):
+        _ = lazy.mesh
+    (tmp_path / "s" / "mesh.ply").unlink()
+    with pytest.raises(SceneError, match="mesh file not found"):
+        Scene.load(tmp_path / "s")

@@ -78,7 +78,7 @@ def test_layers_of_analytic_columns():
 def scene_env() -> TraversalEnv:
     """Two scenes side by side: the analytic scene (env 0, 2) and its mirror image (env 1, 3)."""
     a, b = _scene(), _scene(mirrored=True)
-    b._occ[VOXEL] = a.occupancy()[:, ::-1, :].copy()  # the exact mirror (the grid is symmetric about y = 0)
+    b.set_occupancy(a.occupancy()[:, ::-1, :].copy())  # the exact mirror (the grid is symmetric about y = 0)
     scenes = SceneSet([a, b], [scene_fields(s, None, None) for s in (a, b)], num_envs=4)
     cfg = EnvCfg(num_envs=4, scene_kind="analytic", noise=NoiseCfg(enabled=False))
     cfg.perception.height_map.overhead_cap = CAP

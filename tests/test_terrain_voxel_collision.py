@@ -61,7 +61,7 @@ def _toy_scene() -> Scene:
         goals=[(0.5, 0.5, 0.75)],
         kind="procedural",
     )
-    scene._occ[GRID.voxel] = occ
+    scene.set_occupancy(occ, GRID.voxel)
     return scene
 
 

@@ -15,7 +15,7 @@ from cat.envs.perception import map_points, map_shape, voxel_points, voxel_shape
 from cat.envs.scene_set import SceneSet, scene_fields
 from cat.envs.symmetry import mirror_state
 from cat.envs.traversal_env import TraversalEnv
-from cat.terrain import VOXEL, GridSpec, Scene
+from cat.terrain import GridSpec, Scene
 from cat.terrain.elevation import elevation_layers
 from cat.terrain.primitives import box, combine
 

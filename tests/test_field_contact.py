@@ -155,6 +155,30 @@ def test_warp_backend_judges_the_same_contact():
     assert torch.isfinite(env.sim.qpos).all()
 
 
+@pytest.mark.parametrize("sim", ["mujoco", "warp"])
+def test_backends_keep_the_pose_sensors_of_every_substep(sim):
+    """``sim.obstacles=field`` judges every substep: the backend keeps the body pose readings at the start of each
+    physics step (s_0 = the state before the control step, as a reset to it reads them; the last = sensordata);
+    after a reset every substep holds the reset reading; snapshots carry them."""
+    env = wall_env("field", faces=(FACE_X, FACE_X - 0.1), sim=sim)
+    s, tol = env.sim, dict(atol=1e-5, rtol=0) if sim == "warp" else dict(atol=1e-12, rtol=0)
+    cols = s.substep_columns
+    assert env.field_contact.cfg.substeps and len(cols) == 7 * len(env.field_contact.bodies)
+    assert s.substep_sensordata.shape == (2, s.decimation, len(cols))
+    torch.testing.assert_close(s.substep_sensordata, s.sensordata[:, cols].unsqueeze(1).expand(-1, s.decimation, -1))
+    q0, v0 = s.qpos.clone(), s.qvel.clone()
+    s.step(torch.tensor(home_qpos(env.robot)[7:], dtype=torch.float32).repeat(2, 1) + 0.3)
+    sub = s.substep_sensordata.clone()
+    torch.testing.assert_close(sub[:, -1], s.sensordata[:, cols], **tol)
+    assert (sub[:, 1] - sub[:, 0]).abs().max() > 1e-6  # the substeps differ: the robot moved
+    state = s.get_state()
+    s.reset(torch.arange(2), q0, v0)
+    torch.testing.assert_close(s.sensordata[:, cols], sub[:, 0], **tol)
+    torch.testing.assert_close(s.substep_sensordata, s.sensordata[:, cols].unsqueeze(1).expand_as(sub))
+    s.set_state(state)
+    torch.testing.assert_close(s.substep_sensordata, sub)
+
+
 def _fk_poses(model: mujoco.MjModel, bodies: list[str], qpos: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
     data, ids = mujoco.MjData(model), [model.body(b).id for b in bodies]
     pos, quat = np.zeros((len(qpos), len(ids), 3)), np.zeros((len(qpos), len(ids), 4))
@@ -169,29 +193,37 @@ def _fk_poses(model: mujoco.MjModel, bodies: list[str], qpos: np.ndarray) -> tup
 def agreement() -> dict[str, tuple[int, int, int, int]]:
     """Per typical type: (steps, physical contact steps, field-only, physical-only) over random-action rollouts
     of 16 envs x 50 steps from the env's own episode starts, physical obstacles; the field judgement is made on
-    the same states (body poses by forward kinematics after each control step); culled, unculled and the torch
-    reference judge alike on every step."""
+    the same states, as training makes it (``FieldContactCfg.substeps``): at the start of every physics substep,
+    where the contact sensors are read (body poses by forward kinematics of the backend's substep states);
+    culled, unculled and the torch reference judge alike on every step."""
     out = {}
     for kind in TYPICAL_KINDS:
         sset = SceneSet.typical(kind, 16, variants=2)
         env = TraversalEnv(EnvCfg(num_envs=16), scenes=sset, seed=0)
         env.auto_reset = False
-        fc = FieldContact(env.sim.model, env.robot, FieldContactCfg())
-        full = FieldContact(env.sim.model, env.robot, FieldContactCfg())
+        sim = env.sim
+        assert sim._table is None or len(sim._class_worlds()) == 1  # one rollout: _out_state holds every world
+        fc = FieldContact(sim.model, env.robot, FieldContactCfg())
+        full = FieldContact(sim.model, env.robot, FieldContactCfg())
         full.cull = False
         g = torch.Generator().manual_seed(1)
         phys, field = [], []
         for _ in range(50):
+            before = sim.qpos.numpy().copy()
             env.step(0.5 * torch.randn(16, env.num_actions, generator=g))
-            pos, quat = _fk_poses(env.sim.model, fc.bodies, env.sim.qpos.numpy())
-            sdf = fc.body_sdf(sset.bank, env.field_source.field_idx, pos, quat)
-            assert torch.equal(
-                sdf < fc.cfg.margin, full.body_sdf(sset.bank, env.field_source.field_idx, pos, quat) < fc.cfg.margin
-            )
-            ref = fc.body_sdf_torch(sset.bank, env.field_source.field_idx, pos, quat)  # the fused kernel's reference
-            assert torch.equal(sdf < fc.cfg.margin, ref < fc.cfg.margin)
+            qadr = sim._qadr  # the state at the start of substep k: before the step (k = 0), after substep k
+            states = [before] + [sim._out_state[:, k, qadr : qadr + sim.model.nq] for k in range(sim.decimation - 1)]
+            touching = torch.zeros(16, dtype=torch.bool)
+            for q in states:
+                pos, quat = _fk_poses(sim.model, fc.bodies, q)
+                sdf = fc.body_sdf(sset.bank, env.field_source.field_idx, pos, quat)
+                unculled = full.body_sdf(sset.bank, env.field_source.field_idx, pos, quat)
+                assert torch.equal(sdf < fc.cfg.margin, unculled < fc.cfg.margin)
+                ref = fc.body_sdf_torch(sset.bank, env.field_source.field_idx, pos, quat)  # the kernel's reference
+                assert torch.equal(sdf < fc.cfg.margin, ref < fc.cfg.margin)
+                touching |= (sdf < fc.cfg.margin).any(-1)
             phys.append(env.state.collision.clone())
-            field.append((sdf < fc.cfg.margin).any(-1))
+            field.append(touching)
         p, f = torch.cat(phys), torch.cat(field)
         out[kind] = (len(p), int(p.sum()), int((f & ~p).sum()), int((p & ~f).sum()))
         log.info("%s: steps=%d physical=%d field_only=%d physical_only=%d", kind, *out[kind])

@@ -12,9 +12,11 @@ Points outside their scene's field grid count as free (no obstacle is known ther
 each collision geom is first tested at the centre of a sphere bounding its points: geoms whose centre lies farther
 than the sphere's radius + margin + ``CULL_SLACK`` from every obstacle are not queried point by point.
 
-The judgement is an instant (the sensor time of the control step); physical contact is a max over the physics
-substeps. The margin and spacing, and the agreement measured against physical contact, are in docs/training.md
-("Obstacles as fields").
+With ``FieldContactCfg.substeps`` (the default) the judgement is made at every physics substep, from the pose
+sensors the backend keeps per substep (``PhysicsBackend.substep_sensordata``): the states the physical contact
+sensors are read at, whose max over the substeps is physical contact. Without it, one instant per control step
+(the sensor time of its last substep). The margin and spacing, and the agreement measured against physical
+contact, are in docs/training.md ("Obstacles as fields").
 """
 
 from __future__ import annotations
@@ -56,6 +58,8 @@ class FieldContactCfg:
     margin: float = 0.005
     """m: a point with SDF below this is in contact. +5 mm: best agreement with physical contact measured over
     random-action rollouts (docs/training.md); the fields' 4 cm voxels place surfaces within ±2 cm."""
+    substeps: bool = True
+    """Judge at every physics substep (the states physical contact is counted at), not once per control step."""
 
 
 def check_obstacles(mode: str) -> str:
@@ -63,6 +67,15 @@ def check_obstacles(mode: str) -> str:
     if mode not in OBSTACLE_MODES:
         raise ValueError(f"sim.obstacles={mode!r}; valid: {', '.join(OBSTACLE_MODES)}")
     return mode
+
+
+def substep_pose_sensors(model: mujoco.MjModel, obstacles: str, cfg: FieldContactCfg | None) -> tuple[str, ...]:
+    """The pose sensors a backend keeps for every substep: all of them when ``obstacles`` is ``field`` and the
+    judgement is per substep (``cfg.substeps``), else none."""
+    if obstacles != "field" or not (cfg or FieldContactCfg()).substeps:
+        return ()
+    names = (model.sensor(i).name for i in range(model.nsensor))
+    return tuple(n for n in names if n.startswith(POSE_SENSOR_PREFIX))
 
 
 def collision_bodies(spec: mujoco.MjSpec, robot: RobotCfg) -> list[str]:
@@ -194,13 +207,21 @@ class FieldContact:
         self._cols: torch.Tensor | None = None
         self._packed: dict[torch.device, BodyPoints] = {}
 
-    def sensor_columns(self, sensors: dict) -> None:
-        """Find the pose sensors of the bodies in a backend's ``sensors`` (name -> ``SensorSlice``)."""
+    def sensor_columns(self, sensors: dict, substep_columns: Sequence[int] = ()) -> None:
+        """Find the pose sensors of the bodies in a backend's ``sensors`` (name -> ``SensorSlice``) and, with
+        ``substeps``, in its ``substep_columns`` (the sensordata columns of ``substep_sensordata``)."""
         cols = []
         for b in self.bodies:
             p, q = sensors[f"{POSE_SENSOR_PREFIX}pos_{b}"], sensors[f"{POSE_SENSOR_PREFIX}quat_{b}"]
             cols.append(list(range(p.adr, p.adr + 3)) + list(range(q.adr, q.adr + 4)))
         self._cols = torch.tensor(cols, device=self.device)
+        self._sub_cols = None
+        if self.cfg.substeps:
+            where = {c: i for i, c in enumerate(substep_columns)}
+            missing = [c for row in cols for c in row if c not in where]
+            if missing:
+                raise ValueError("field_contact.substeps: the backend keeps no per-substep pose sensors")
+            self._sub_cols = torch.tensor([[where[c] for c in row] for row in cols], device=self.device)
 
     @property
     def pose_columns(self) -> torch.Tensor:
@@ -209,11 +230,13 @@ class FieldContact:
             raise RuntimeError("FieldContact.sensor_columns was never called")
         return self._cols
 
-    def poses(self, sensordata: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """(pos (n, B, 3), quat (n, B, 4)) of the bodies from sensor rows (n, nsensordata)."""
+    def poses(self, sensordata: torch.Tensor, cols: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        """(pos (n, B, 3), quat (n, B, 4)) of the bodies from sensor rows (n, nsensordata), or from rows of other
+        columns (``cols``: (B, 7) indices into them)."""
         if self._cols is None:
             raise RuntimeError("FieldContact.sensor_columns was never called")
-        x = sensordata[:, self._cols.to(sensordata.device)].to(self.device, torch.float32)
+        cols = self._cols if cols is None else cols
+        x = sensordata[:, cols.to(sensordata.device)].to(self.device, torch.float32)
         q = x[..., 3:]
         return x[..., :3], q / q.norm(dim=-1, keepdim=True).clamp_min(1e-9)
 
@@ -285,10 +308,22 @@ class FieldContact:
         lo, hi = lo.to(p)[:, None], hi.to(p)[:, None]
         return torch.maximum(lo - p, p - hi).clamp_min(0.0).norm(dim=-1)
 
-    def judge(self, sensordata: torch.Tensor, bank, field_idx: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """(collision (n,), hard_collision (n,)) of the worlds whose sensor rows are ``sensordata`` (n, ...)."""
-        pos, quat = self.poses(sensordata)
-        touching = self.body_sdf(bank, field_idx, pos, quat) < self.cfg.margin
+    def judge(
+        self, sensordata: torch.Tensor, bank, field_idx: torch.Tensor, substeps: torch.Tensor | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """(collision (n,), hard_collision (n,)) of the worlds whose sensor rows are ``sensordata`` (n, ...); with
+        ``substeps`` (n, S, k: the backend's ``substep_sensordata`` rows) a body touches when it does at any of the
+        S substeps."""
+        if substeps is None:
+            pos, quat = self.poses(sensordata)
+            sdf = self.body_sdf(bank, field_idx, pos, quat)
+        else:
+            if self._sub_cols is None:
+                raise RuntimeError("FieldContact.judge: substeps given but sensor_columns found no substep columns")
+            n, ns = substeps.shape[:2]
+            pos, quat = self.poses(substeps.reshape(n * ns, -1), self._sub_cols)
+            sdf = self.body_sdf(bank, field_idx.repeat_interleave(ns), pos, quat).view(n, ns, -1).amin(1)
+        touching = sdf < self.cfg.margin
         hard = torch.zeros_like(touching[:, 0]) if self.ghost_obstacles else (touching & self.hard_bodies).any(-1)
         return touching.any(dim=-1), hard
 
@@ -307,14 +342,15 @@ def field_contact_for(env: TraversalEnv, model: mujoco.MjModel, cfg: FieldContac
     fc = FieldContact(
         model, env.robot, cfg or FieldContactCfg(), env.device, env.cfg.ghost_parts, env.cfg.ghost_obstacles
     )
-    fc.sensor_columns(env.sim.sensors)
+    fc.sensor_columns(env.sim.sensors, env.sim.substep_columns)
     log.info(
         "sim.obstacles=field: one floor-only model for %d scene(s); contact where the SDF < %.3f m at %d points "
-        "on %d bodies (spacing %.3f m)",
+        "on %d bodies (spacing %.3f m), judged %s",
         len(env.scenes.scenes),
         fc.cfg.margin,
         fc.num_points,
         len(fc.bodies),
         fc.cfg.spacing,
+        "at every physics substep" if fc.cfg.substeps else "once per control step",
     )
     return fc

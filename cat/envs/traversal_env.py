@@ -20,7 +20,13 @@ from cat.envs import snapshot
 from cat.envs.config import EnvCfg
 from cat.envs.curriculum import DifficultyCurriculum
 from cat.envs.episode_log import episode_log
-from cat.envs.field_contact import FieldContactCfg, check_obstacles, field_contact_for, field_model
+from cat.envs.field_contact import (
+    FieldContactCfg,
+    check_obstacles,
+    field_contact_for,
+    field_model,
+    substep_pose_sensors,
+)
 from cat.envs.field_source import FieldSample
 from cat.envs.math_utils import quat_rotate_inverse, yaw_from_quat, yaw_quat
 from cat.envs.mdp import events
@@ -97,8 +103,15 @@ class TraversalEnv(VecEnv):
         pool = self.world_models.pool if self.world_models else 0
         self._physical_members = 0 if self.obstacles == "field" else make_training_ghosts(models, cfg, pool)
         model = models[0]
+        judged = self.obstacles if scenes is not None else "physical"  # field contact needs scenes
         self.sim = make_backend(
-            sim, model, self.num_envs, self.robot.decimation, device=device, world_models=self.world_models
+            sim,
+            model,
+            self.num_envs,
+            self.robot.decimation,
+            device=device,
+            world_models=self.world_models,
+            substep_sensors=substep_pose_sensors(model, judged, field_contact),
         )
         self.device = self.sim.device
         self.field = None
@@ -201,8 +214,9 @@ class TraversalEnv(VecEnv):
         sens = s.sensordata[ids].to(torch.float32)
         quat = qpos[:, 3:7]
         link_pos, link_vel = sens[:, self._i_link_pos], sens[:, self._i_link_vel]
-        if self.field_contact is not None:
-            collision, hard = self.field_contact.judge(sens, self.field_source.bank, self.field_source.field_idx[ids])
+        if (fc := self.field_contact) is not None:
+            sub = s.substep_sensordata[ids] if fc.cfg.substeps else None
+            collision, hard = fc.judge(sens, self.field_source.bank, self.field_source.field_idx[ids], sub)
         else:
             collision, hard = self._physical_contact(sens, ids)
         return SimState(

@@ -34,6 +34,7 @@ def make_backend(
     device: str = "cpu",
     max_sensors: Sequence[str] | None = None,
     world_models: WorldModels | None = None,
+    substep_sensors: Sequence[str] = (),
 ) -> PhysicsBackend:
     """Build the backend ``name`` for ``num_envs`` worlds; ``device`` is a torch device string.
 
@@ -41,6 +42,7 @@ def make_backend(
 
     ``max_sensors``: sensors reported as their maximum over the substeps of a control step; ``None``: the
     robot-obstacle contact sensors when the model has them (collisions count on every physics substep).
+    ``substep_sensors``: sensors also kept for every substep (``PhysicsBackend.substep_sensordata``).
     """
     check_backend(name)
     if max_sensors is None:
@@ -51,7 +53,7 @@ def make_backend(
             raise ValueError(f"sim=mujoco runs on the CPU; got device={device!r}. Use sim=warp for CUDA.")
         from cat.envs.sim.mujoco_backend import MujocoBackend
 
-        backend = MujocoBackend(model, num_envs, decimation, max_sensors=max_sensors)
+        backend = MujocoBackend(model, num_envs, decimation, max_sensors=max_sensors, substep_sensors=substep_sensors)
         if world_models is not None:
             backend.set_model_table(world_models.models)
         return backend
@@ -60,4 +62,6 @@ def make_backend(
 
     dev = "cpu" if device.startswith("cpu") else device
     slots = SlotTable.build(world_models.models, world_models.compose) if world_models is not None else None
-    return WarpBackend(model, num_envs, decimation, device=dev, max_sensors=max_sensors, slots=slots)
+    return WarpBackend(
+        model, num_envs, decimation, device=dev, max_sensors=max_sensors, slots=slots, substep_sensors=substep_sensors
+    )

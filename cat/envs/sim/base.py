@@ -12,6 +12,11 @@ sensors for the reset worlds from their new state.
 Sensors named in ``max_sensors`` (the robot-obstacle contact count) instead report the maximum over all
 ``decimation`` physics steps of the control step, so an event that lasts less than a control step (a
 touch at an intermediate substep) is never lost. Over a trial every simulated state is checked once.
+
+Sensors named in ``substep_sensors`` (the body poses of field-judged contact) are also kept for every substep:
+``substep_sensordata`` (N, decimation, k) holds their readings at the start of each physics step of the last control
+step (the states s_0 … s_{decimation-1}, s_0 being the previous control step's final state), so a judgement made
+from them sees the states the contact sensors see. After ``reset`` every substep holds the reset state's reading.
 """
 
 from __future__ import annotations
@@ -56,7 +61,14 @@ class PhysicsBackend(ABC):
     #: torch device of all exposed tensors
     device: torch.device
 
-    def __init__(self, model: mujoco.MjModel, num_envs: int, decimation: int, max_sensors: Sequence[str] = ()):
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        num_envs: int,
+        decimation: int,
+        max_sensors: Sequence[str] = (),
+        substep_sensors: Sequence[str] = (),
+    ):
         if num_envs < 1:
             raise ValueError(f"num_envs must be >= 1, got {num_envs}")
         if decimation < 1:
@@ -68,12 +80,16 @@ class PhysicsBackend(ABC):
             model.sensor(i).name: SensorSlice(int(model.sensor_adr[i]), int(model.sensor_dim[i]))
             for i in range(model.nsensor)
         }
-        missing = [name for name in max_sensors if name not in self.sensors]
-        if missing:
-            raise KeyError(f"max_sensors {missing} not in the model; model sensors: {sorted(self.sensors)}")
+        for key, names in (("max_sensors", max_sensors), ("substep_sensors", substep_sensors)):
+            missing = [name for name in names if name not in self.sensors]
+            if missing:
+                raise KeyError(f"{key} {missing} not in the model; model sensors: {sorted(self.sensors)}")
         #: sensordata columns reduced with max over the substeps of a control step (see the module docstring)
         slices = [self.sensors[name] for name in max_sensors]
         self.max_columns = [c for s in slices for c in range(s.adr, s.adr + s.dim)]
+        #: sensordata columns also kept for every substep (``substep_sensordata``), in this order
+        slices = [self.sensors[name] for name in substep_sensors]
+        self.substep_columns = [c for s in slices for c in range(s.adr, s.adr + s.dim)]
         #: world-steps in which the simulator reset a world on its own (MuJoCo's auto-reset on a bad qacc, which
         #: hides a divergence as a jump back to qpos0); counted since construction. mujoco_warp has no auto-reset:
         #: a diverged world shows as non-finite state instead.
@@ -83,6 +99,7 @@ class PhysicsBackend(ABC):
     _qpos: torch.Tensor
     _qvel: torch.Tensor
     _sens: torch.Tensor
+    _sub: torch.Tensor
 
     @property
     def qpos(self) -> torch.Tensor:
@@ -98,6 +115,11 @@ class PhysicsBackend(ABC):
     def sensordata(self) -> torch.Tensor:
         """(N, nsensordata) sensor readings (see the module docstring for their timing)."""
         return self._sens
+
+    @property
+    def substep_sensordata(self) -> torch.Tensor:
+        """(N, decimation, len(substep_columns)) readings of ``substep_columns`` at every substep (module docstring)."""
+        return self._sub
 
     def sensor(self, name: str) -> torch.Tensor:
         """(N, dim) view of one named sensor."""
@@ -120,6 +142,8 @@ class PhysicsBackend(ABC):
     def get_state(self) -> dict[str, torch.Tensor]:
         """Copies of every world's qpos, qvel and sensordata (and its model id with per-world models)."""
         state = {"qpos": self.qpos.clone(), "qvel": self.qvel.clone(), "sensordata": self.sensordata.clone()}
+        if self.substep_columns:
+            state["substeps"] = self.substep_sensordata.clone()
         if self.per_world_models:
             state["model_ids"] = self.model_ids
         return state
@@ -136,6 +160,11 @@ class PhysicsBackend(ABC):
             self.assign_models(torch.arange(self.num_envs), state["model_ids"])
         self.reset(torch.arange(self.num_envs), state["qpos"], state["qvel"])
         self._sens.copy_(state["sensordata"].to(self._sens))
+        if self.substep_columns:  # a snapshot from before substep sensors existed: the last substep's reading
+            sub = state.get("substeps")
+            if sub is None or sub.shape != self._sub.shape:
+                sub = self._sens[:, self.substep_columns].unsqueeze(1)
+            self._sub.copy_(sub.to(self._sub))
 
     # --- per-world models (sim.per_world_scenes) ---------------------------------------------------------
     @property

@@ -50,8 +50,9 @@ class MujocoBackend(PhysicsBackend):
         decimation: int,
         nthread: int | None = None,
         max_sensors: Sequence[str] = (),
+        substep_sensors: Sequence[str] = (),
     ):
-        super().__init__(model, num_envs, decimation, max_sensors)
+        super().__init__(model, num_envs, decimation, max_sensors, substep_sensors)
         self.device = torch.device("cpu")
         self.nthread = nthread or max(1, min(os.cpu_count() or 1, num_envs))
         self._rollout = rollout.Rollout(nthread=self.nthread)
@@ -73,6 +74,8 @@ class MujocoBackend(PhysicsBackend):
         self._qpos = torch.from_numpy(self._state[:, self._qadr : self._qadr + model.nq])
         self._qvel = torch.from_numpy(self._state[:, self._vadr : self._vadr + model.nv])
         self._sens = torch.from_numpy(self._sens_np)
+        self._sub_np = np.zeros((n, decimation, len(self.substep_columns)))
+        self._sub = torch.from_numpy(self._sub_np)
 
         d = self._scratch
         mujoco.mj_resetData(model, d)
@@ -83,6 +86,7 @@ class MujocoBackend(PhysicsBackend):
         mujoco.mj_getState(model, d, self._state[0], spec)
         self._state[:] = self._state[0]
         self._sens_np[:] = d.sensordata
+        self._sub_np[:] = d.sensordata[self.substep_columns]
 
     def step(self, ctrl: torch.Tensor) -> None:
         self._ctrl[:] = ctrl.detach().to("cpu", torch.float64).numpy()[:, None, :]
@@ -134,6 +138,8 @@ class MujocoBackend(PhysicsBackend):
         if self.max_columns:
             rows = ids if isinstance(ids, slice) else ids[:, None]
             self._sens_np[rows, self.max_columns] = out_sens[:, :, self.max_columns].max(axis=1)
+        if self.substep_columns:
+            self._sub_np[ids] = out_sens[:, :, self.substep_columns]
 
     def reset(self, env_ids: torch.Tensor, qpos: torch.Tensor, qvel: torch.Tensor) -> None:
         ids = as_index(env_ids)
@@ -153,6 +159,7 @@ class MujocoBackend(PhysicsBackend):
             mujoco.mj_forward(m, d)
             mujoco.mj_getState(m, d, self._state[i], spec)
             self._sens_np[i] = d.sensordata
+            self._sub_np[i] = d.sensordata[self.substep_columns]
 
     # --- per-world models ----------------------------------------------------------------------------------
     def set_model_table(self, models: Sequence[mujoco.MjModel]) -> None:

@@ -27,7 +27,8 @@ exceeds them drops contacts and sets its bit in ``overflow``. ``step`` and ``res
 raise (``check_overflow``), so a dropped contact is an error, never a silent undercount.
 
 ``max_sensors`` columns: a small kernel inside the captured decimation loop keeps their running max over the
-substeps and writes it into ``sensordata`` after the last one.
+substeps and writes it into ``sensordata`` after the last one; ``substep_sensors`` columns are copied into
+``substep_sensordata`` after each substep by another.
 
 Per-world scenes (``slots``, ``sim.per_world_scenes``): the backend steps a slot model
 (``cat.envs.sim.warp_slots``) whose obstacle geom rows are batched per world; ``assign_models`` copies a table
@@ -110,6 +111,13 @@ def _substep_max(sens: wp.array2d(dtype=float), cols: wp.array(dtype=int), acc: 
 
 
 @wp.kernel
+def _substep_copy(sens: wp.array2d(dtype=float), cols: wp.array(dtype=int), out: wp.array3d(dtype=float), k: int):
+    """out[w, k, j] = sens[w, cols[j]]: the ``substep_sensors`` reading of substep ``k``."""
+    w, j = wp.tid()
+    out[w, k, j] = sens[w, cols[j]]
+
+
+@wp.kernel
 def _write_columns(acc: wp.array2d(dtype=float), cols: wp.array(dtype=int), sens: wp.array2d(dtype=float)):
     w, j = wp.tid()
     sens[w, cols[j]] = acc[w, j]
@@ -170,12 +178,13 @@ class WarpBackend(PhysicsBackend):
         graph: bool = True,
         max_sensors: Sequence[str] = (),
         slots: SlotTable | None = None,
+        substep_sensors: Sequence[str] = (),
     ):
         if slots is not None:
             if slots.model.nsensordata != model.nsensordata or slots.model.nq != model.nq:
                 raise ValueError("WarpBackend: slots.model does not fit model (sensors or state differ)")
             model = slots.model
-        super().__init__(model, num_envs, decimation, max_sensors)
+        super().__init__(model, num_envs, decimation, max_sensors, substep_sensors)
         self.slots = slots
         self.wp_device = wp.get_device(resolve_device(device))
         self.device = torch.device(wp.device_to_torch(self.wp_device))
@@ -197,6 +206,8 @@ class WarpBackend(PhysicsBackend):
             self._reset_mask = wp.zeros(num_envs, dtype=bool)
             self._max_cols = wp.array(self.max_columns, dtype=int)
             self._max_acc = wp.zeros((num_envs, len(self.max_columns)), dtype=float)
+            self._sub_cols = wp.array(self.substep_columns, dtype=int)
+            self._sub_buf = wp.zeros((num_envs, decimation, len(self.substep_columns)), dtype=float)
         d = self.d
         self._qpos = wp.to_torch(d.qpos)
         self._qvel = wp.to_torch(d.qvel)
@@ -205,6 +216,7 @@ class WarpBackend(PhysicsBackend):
         self._overflow = wp.to_torch(d.overflow)
         self._mask_t = wp.to_torch(self._reset_mask)
         self._sens_saved = torch.empty_like(self._sens)
+        self._sub = wp.to_torch(self._sub_buf)
         self._subtree: torch.Tensor | None = None  # (nbody, nbody) subtree membership, for mass scaling
         self._zeroed = [wp.to_torch(getattr(d, f)) for f in _ZEROED_FIELDS if getattr(d, f).size > 0]
         # model features whose reset state the torch reset does not cover: use mjw.reset_data (slower) then
@@ -230,6 +242,8 @@ class WarpBackend(PhysicsBackend):
             if model.nkey > 0:
                 mjw.reset_data_keyframe(self.m, d, 0)
             mjw.forward(self.m, d)
+            if self.substep_columns:
+                self._sub.copy_(self._sens[:, self.substep_columns].unsqueeze(1).expand_as(self._sub))
             self._step_graph = self._capture(self._physics_steps)
             self._forward_graph = self._capture(lambda: mjw.forward(self.m, self.d))
         logger.info(
@@ -289,12 +303,17 @@ class WarpBackend(PhysicsBackend):
             self._qvel[ids] = qvel.to(self._qvel).reshape(len(ids), -1)
             self._launch(self._forward_graph, lambda: mjw.forward(self.m, self.d))
             self._sens.copy_(torch.where(self._mask_t[:, None], self._sens, self._sens_saved))
+            if self.substep_columns:
+                self._sub[ids] = self._sens[ids][:, self.substep_columns].unsqueeze(1)
         self.check_overflow()
 
     def _physics_steps(self) -> None:
-        ncol = len(self.max_columns)
+        ncol, nsub = len(self.max_columns), len(self.substep_columns)
         for k in range(self.decimation):
             mjw.step(self.m, self.d)
+            if nsub:
+                args = [self.d.sensordata, self._sub_cols, self._sub_buf, k]
+                wp.launch(_substep_copy, dim=(self.num_envs, nsub), inputs=args)
             if ncol:
                 dims, args = (self.num_envs, ncol), [self.d.sensordata, self._max_cols, self._max_acc, int(k == 0)]
                 wp.launch(_substep_max, dim=dims, inputs=args)

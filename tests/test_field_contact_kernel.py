@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 import torch
 
@@ -18,8 +19,10 @@ from cat.envs.config import EnvCfg
 from cat.envs.field_contact import CULL_SLACK, FieldContact
 from cat.envs.scene_set import SceneSet
 from cat.envs.traversal_env import TraversalEnv
-from cat.fields import FieldBank
+from cat.fields import FieldBank, Grid, contact_sdf, sdf_from_occupancy
 from cat.fields.body_points import BodyPoints
+from cat.terrain.primitives import box
+from cat.terrain.voxel import GridSpec, occupancy
 from tests.test_field_contact import FACE_X, front_offset, pose_at, wall_env
 
 
@@ -35,11 +38,13 @@ def assert_same_judgement(fc: FieldContact, fused: torch.Tensor, ref: torch.Tens
 
 
 def both(fc: FieldContact, bank, idx, pos, quat, cull: bool = True) -> tuple[torch.Tensor, torch.Tensor]:
-    fc.cull = cull
+    """The fused kernel and the torch reference, both on the fields' d (the reference reads d only; the contact
+    SDF goes through the same kernel: ``test_contact_sdf_is_read_in_place_of_d``)."""
+    fc.cull, sdf, fc.cfg.sdf = cull, fc.cfg.sdf, "field"
     try:
         return fc.body_sdf(bank, idx, pos, quat), fc.body_sdf_torch(bank, idx, pos, quat)
     finally:
-        fc.cull = True
+        fc.cull, fc.cfg.sdf = True, sdf
 
 
 def test_constructed_poses_inside_and_clear_judge_the_same():
@@ -132,6 +137,61 @@ def test_rollout_judges_the_same(typical_env):
         assert_same_judgement(fc, fused, ref)
 
 
+def test_contact_sdf_is_read_in_place_of_d(typical_env):
+    """``contact=True`` reads the bank's contact SDF through the same kernel: a contact grid of d + c per scene gives
+    the d result + c; the env's contact grids differ from d only near the obstacles, mostly by d's voxel error
+    (more where an obstacle leaves the grid, e.g. through its top, which the occupancy SDF cannot see)."""
+    env = typical_env
+    fc, src = env.field_contact, env.field_source.bank
+    assert fc.cfg.sdf == "mesh" and src.contact_data is not None  # the default judgement built the contact SDF
+    for s in range(src.num_scenes):
+        d = torch.from_numpy(src.scene_sdf(s))
+        c = torch.from_numpy(src.contact_data[int(src.scene_offset[s]) :][: d.numel()].view(d.shape).numpy())
+        changed = (c - d).abs() > 1e-6
+        assert changed.any() and (d[changed].abs() < fc.cfg.band).all()
+        assert (c - d)[changed].abs().quantile(0.9) < 0.03
+    bank = FieldBank(src.layouts)
+    bank.scene_data.copy_(src.scene_data)
+    bank.goal_data.copy_(src.goal_data)
+    bank.scene_origin.copy_(src.scene_origin)
+    bank._unfilled.clear()
+    g = torch.Generator().manual_seed(7)
+    idx = torch.randint(0, bank.num_fields, (200,), generator=g)
+    pos, quat = random_poses(bank, idx, len(fc.bodies), g)
+    packed = fc.body_points(bank.device)
+    with pytest.raises(RuntimeError, match="no contact SDF"):
+        bank.min_sdf_on_bodies(idx, pos, quat, packed, contact=True)
+    shift = torch.linspace(-0.05, 0.05, bank.num_scenes)
+    for s in range(bank.num_scenes):
+        bank.set_contact_sdf(s, bank.scene_sdf(s) + float(shift[s]))
+    with pytest.raises(ValueError, match="contact SDF of shape"):
+        bank.set_contact_sdf(0, bank.scene_sdf(0)[1:])
+    on_d = bank.min_sdf_on_bodies(idx, pos, quat, packed, cull=False)
+    on_c = bank.min_sdf_on_bodies(idx, pos, quat, packed, cull=False, contact=True)
+    expect = on_d + shift[bank.field_scene[idx].long()][:, None]
+    assert torch.equal(torch.isinf(on_c), torch.isinf(on_d)) and torch.isfinite(on_d).any()
+    finite = torch.isfinite(on_d)
+    torch.testing.assert_close(on_c[finite], expect[finite], rtol=0.0, atol=1e-5)
+
+
+def test_contact_sdf_is_exact_near_a_box_off_the_voxel_grid():
+    """A box whose faces fall mid-voxel: d from its 4 cm occupancy is off by up to ~2 cm; the contact SDF equals the
+    box's exact signed distance at every voxel centre within the band, and d elsewhere."""
+    lo, hi = np.array([0.013, -0.31, 0.0]), np.array([0.057, 0.29, 0.43])  # a 4.4 cm bar
+    grid = Grid((-0.6, -0.6, 0.0), 0.04, (30, 30, 20))
+    mesh = box(tuple(lo), tuple(hi))
+    d = sdf_from_occupancy(occupancy(mesh, GridSpec(grid.origin, grid.voxel, grid.shape)), grid)
+    c = contact_sdf(mesh, grid, d, band=0.1)
+    centres = np.stack(np.meshgrid(*[grid.origin[i] + grid.voxel * (np.arange(n) + 0.5) for i, n in
+                                     enumerate(grid.shape)], indexing="ij"), axis=-1)  # fmt: skip
+    q = np.abs(centres - (lo + hi) / 2) - (hi - lo) / 2  # the analytic box SDF
+    exact = np.linalg.norm(np.maximum(q, 0), axis=-1) + np.minimum(q.max(-1), 0)
+    near = np.abs(d) < 0.1
+    assert np.abs(d - exact)[near].max() > 0.01  # the occupancy SDF is off here
+    np.testing.assert_allclose(c[near], exact[near], atol=1e-5)
+    np.testing.assert_array_equal(c[~near], d[~near].astype(np.float32))
+
+
 def test_body_points_packing_keeps_every_point_with_its_body():
     groups = [torch.rand(k, 3) for k in (3, 5, 2, 4)]
     centre = torch.arange(12.0).view(4, 3)
@@ -155,14 +215,15 @@ def test_bench_field_contact_prints_its_lines(capsys):
     args = ["field_contact", "--envs", "8", "--scenes", "2", "--warmup", "2", "--steps", "1", "--repeat", "1"]
     assert bench.main(args) == 0
     lines = capsys.readouterr().out.strip().splitlines()
+    assert re.fullmatch(r"case=contact_sdf scenes=2 env_build_s=[\d.]+ contact_sdf_s_per_scene=[\d.]+", lines[-10])
     pattern = (
-        r"case=field_contact impl=(torch|fused) placement=(start|anywhere|course) envs=8 scenes=2 points=(\d+) "
-        r"contact_frac=([\d.]+) ms_per_step=([\d.]+) cpu_ms_per_step=([\d.]+)"
+        r"case=field_contact impl=(torch|fused|contact) placement=(start|anywhere|course) envs=8 scenes=2 "
+        r"points=(\d+) contact_frac=([\d.]+) ms_per_step=([\d.]+) cpu_ms_per_step=([\d.]+)"
     )
-    found = [re.fullmatch(pattern, line) for line in lines[-6:]]
+    found = [re.fullmatch(pattern, line) for line in lines[-9:]]
     assert all(found), lines
     assert [(m.group(1), m.group(2)) for m in found] == [
-        (impl, place) for place in ("start", "anywhere", "course") for impl in ("torch", "fused")
+        (impl, place) for place in ("start", "anywhere", "course") for impl in ("torch", "fused", "contact")
     ]
-    for torch_line, fused_line in zip(found[::2], found[1::2], strict=True):  # the same judgement
+    for torch_line, fused_line in zip(found[::3], found[1::3], strict=True):  # the same judgement on d
         assert torch_line.group(4) == fused_line.group(4)

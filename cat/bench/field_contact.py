@@ -7,9 +7,12 @@ stays a real one): ``start`` (the rows as they are: robots near their episode st
 culled), ``anywhere`` (root at a uniform spot of its scene's grid box) and ``course`` (root x 0.1-1.9 m past the
 typical start line, |y| <= 0.3 m: among the obstacles, most robots in contact, the worst case). For each,
 ``FieldContact.judge`` runs with the torch reference (``impl=torch``: torch transforms + ``FieldBank.query`` per
-point) and the fused Warp kernel (``impl=fused``), taking turns call by call.
+point) and the fused Warp kernel (``impl=fused``), both on the fields' d, and the fused kernel on the contact SDF
+(``impl=contact``, the default judgement ``sim.field_contact.sdf=mesh``), taking turns call by call. One
+instant per call: the default judgement makes ``decimation`` (4) of them per control step, one per substep.
+The contact SDF's one-time cost (computed when the env is built) is printed as ``case=contact_sdf``.
 
-Prints one line per (placement, impl): ``case=field_contact impl=<torch|fused> placement=<start|anywhere|course>
+Prints one line per (placement, impl): ``case=field_contact impl=<torch|fused|contact> placement=<start|anywhere|course>
 envs=<n> scenes=<n> points=<n> contact_frac=<x> ms_per_step=<x> cpu_ms_per_step=<x>`` (medians over steps ×
 ``--repeat``; wall clock, and the process's CPU time, which a busy machine inflates less).
 """
@@ -25,13 +28,13 @@ import torch
 
 from cat.bench.train_obstacles import typical_scenes
 from cat.envs.config import EnvCfg
-from cat.envs.field_contact import FieldContact
+from cat.envs.field_contact import FieldContact, FieldContactCfg, fill_contact_sdf
 from cat.envs.scene_set import SceneSet, scene_fields
 from cat.envs.traversal_env import TraversalEnv
 from cat.terrain import TYPICAL_KINDS, make_typical
 
 log = logging.getLogger(__name__)
-IMPLS = ("torch", "fused")
+IMPLS = ("torch", "fused", "contact")
 PLACEMENTS = ("start", "anywhere", "course")
 EDGE = 0.3
 """m: robots placed ``anywhere`` keep their root this far inside the grid box (in x and y)."""
@@ -80,19 +83,23 @@ def time_judge(
     ``rows`` × ``repeat``. The impls take turns call by call, so a load that varies (a busy machine) falls on both
     alike; CPU time counts every thread's work and not the time other processes hold the cores."""
     wall, cpu, hits = ({i: [] for i in impls} for _ in range(3))
+
+    def use(impl: str) -> None:
+        fc.fused, fc.cfg.sdf = impl != "torch", "mesh" if impl == "contact" else "field"
+
     for i in impls:  # warm-up: kernel load, allocations
-        fc.fused = i == "fused"
+        use(i)
         fc.judge(rows[0], bank, idx)
     for _ in range(repeat):
         for sens in rows:
             for i in impls:
-                fc.fused = i == "fused"
+                use(i)
                 t0, c0 = time.perf_counter(), time.process_time()
                 collision, _ = fc.judge(sens, bank, idx)
                 wall[i].append((time.perf_counter() - t0) * 1e3)
                 cpu[i].append((time.process_time() - c0) * 1e3)
                 hits[i].append(float(collision.float().mean()))
-    fc.fused = True
+    use("contact")
     return {i: (float(np.median(wall[i])), float(np.median(cpu[i])), float(np.mean(hits[i]))) for i in impls}
 
 
@@ -104,7 +111,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--warmup", type=int, default=20, help="random-action control steps before the snapshots")
     parser.add_argument("--steps", type=int, default=5, help="snapshots timed")
     parser.add_argument("--repeat", type=int, default=2)
-    parser.add_argument("--impl", choices=(*IMPLS, "both"), default="both")
+    parser.add_argument("--impl", choices=(*IMPLS, "all"), default="all")
     parser.add_argument("--placement", choices=(*PLACEMENTS, "all"), default="all")
     parser.add_argument("--torch-threads", type=int, default=1)
     parser.add_argument("--bank-threads", type=int, default=None, help="concurrent CPU launches (bank default)")
@@ -117,7 +124,15 @@ def main(argv: list[str] | None = None) -> None:
     else:  # difficulties spread over [0, 1]
         scenes = [make_typical(args.kind, i / max(args.scenes - 1, 1), args.seed + i) for i in range(args.scenes)]
     sset = SceneSet(scenes, lambda i: scene_fields(scenes[i], None, None), args.envs, per_world=True)
+    t0 = time.perf_counter()
     env = TraversalEnv(EnvCfg(num_envs=args.envs), scenes=sset, seed=args.seed, obstacles="field")
+    t1 = time.perf_counter()
+    fill_contact_sdf(sset, FieldContactCfg(band=env.field_contact.cfg.band + 1e-9))  # timed again, alone
+    print(
+        f"case=contact_sdf scenes={len(scenes)} env_build_s={t1 - t0:.1f} "
+        f"contact_sdf_s_per_scene={(time.perf_counter() - t1) / len(scenes):.3f}",
+        flush=True,
+    )
     fc, bank, idx = env.field_contact, env.field_source.bank, env.field_source.field_idx
     if args.bank_threads is not None:
         bank.num_threads = max(1, args.bank_threads)
@@ -125,7 +140,7 @@ def main(argv: list[str] | None = None) -> None:
     g = torch.Generator().manual_seed(args.seed + 1)
     places = PLACEMENTS if args.placement == "all" else (args.placement,)
     sets = {p: [moved(fc, r, bank, idx, p, g) for r in rows] for p in places}
-    impls = IMPLS if args.impl == "both" else (args.impl,)
+    impls = IMPLS if args.impl == "all" else (args.impl,)
     for placement in places:
         for impl, (ms, cpu_ms, frac) in time_judge(fc, sets[placement], bank, idx, impls, args.repeat).items():
             print(

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import logging
 import math
+import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -35,6 +36,8 @@ from cat.envs.math_utils import quat_to_matrix
 from cat.envs.robot import RobotCfg
 from cat.envs.scene import build_env_model
 from cat.fields.body_points import BodyPoints
+from cat.fields.contact_sdf import DEFAULT_BAND, contact_sdf
+from cat.terrain.mujoco_export import uses_voxels
 
 if TYPE_CHECKING:
     from cat.envs.traversal_env import TraversalEnv
@@ -42,6 +45,8 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 OBSTACLE_MODES = ("physical", "field")
+CONTACT_SDFS = ("mesh", "field")
+"""``sim.field_contact.sdf``: which SDF the judgement reads (``FieldContactCfg.sdf``)."""
 """``sim.obstacles``: obstacle geometry in the physics worlds (``physical``) or only as SDF (``field``)."""
 POSE_SENSOR_PREFIX = "field_contact_pose_"
 CULL_SLACK = 0.06
@@ -55,11 +60,16 @@ class FieldContactCfg:
 
     spacing: float = 0.03
     """m: largest gap between neighbouring sample points on a collision geom's surface."""
-    margin: float = 0.005
-    """m: a point with SDF below this is in contact. +5 mm: best agreement with physical contact measured over
-    random-action rollouts (docs/training.md); the fields' 4 cm voxels place surfaces within ±2 cm."""
+    margin: float = 0.004
+    """m: a point with SDF below this is in contact. +4 mm: the best agreement with physical contact over
+    random-action rollouts (a calibration sample apart from the test's; docs/training.md, "Obstacles as fields")."""
     substeps: bool = True
     """Judge at every physics substep (the states physical contact is counted at), not once per control step."""
+    sdf: str = "mesh"
+    """``mesh``: read each scene's contact SDF, the SDF of what its physics collides with (``fill_contact_sdf``,
+    computed when the env is built); ``field``: the fields' d (4 cm occupancy voxels) for every scene."""
+    band: float = DEFAULT_BAND
+    """m: how far from a surface (by d) the contact SDF is exact (``sdf=mesh``)."""
 
 
 def check_obstacles(mode: str) -> str:
@@ -178,6 +188,8 @@ class FieldContact:
     ):
         if cfg.spacing <= 0:
             raise ValueError(f"sim.field_contact.spacing={cfg.spacing}: must be > 0")
+        if cfg.sdf not in CONTACT_SDFS:
+            raise ValueError(f"sim.field_contact.sdf={cfg.sdf!r}; valid: {', '.join(CONTACT_SDFS)}")
         self.cfg, self.device = cfg, torch.device(device)
         geoms = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, g) for g in robot.collision_geoms]
         body_ids = list(dict.fromkeys(int(model.geom_bodyid[g]) for g in geoms))
@@ -250,10 +262,13 @@ class FieldContact:
 
     def body_sdf(self, bank, field_idx: torch.Tensor, pos: torch.Tensor, quat: torch.Tensor) -> torch.Tensor:
         """(n, B) smallest SDF over each body's points (+inf: clear, or culled as clearly free)."""
+        contact = self.cfg.sdf == "mesh"
         if not self.fused:
+            if contact:
+                raise ValueError("FieldContact: the torch reference reads the fields' d (sim.field_contact.sdf=field)")
             return self.body_sdf_torch(bank, field_idx, pos, quat)
-        sdf = bank.min_sdf_on_bodies(field_idx, pos, quat, self.body_points(bank.device), cull=self.cull)
-        return sdf.to(self.device)
+        points = self.body_points(bank.device)
+        return bank.min_sdf_on_bodies(field_idx, pos, quat, points, cull=self.cull, contact=contact).to(self.device)
 
     def body_sdf_torch(self, bank, field_idx: torch.Tensor, pos: torch.Tensor, quat: torch.Tensor) -> torch.Tensor:
         """:meth:`body_sdf` in torch through ``bank.query`` (the reference the fused kernel is tested against)."""
@@ -328,6 +343,29 @@ class FieldContact:
         return touching.any(dim=-1), hard
 
 
+def fill_contact_sdf(scenes, cfg: FieldContactCfg) -> None:
+    """Give every scene of ``scenes.bank`` (a ``SceneSet``) its contact SDF, once: the SDF of the geometry its
+    physics worlds collide with. Scenes of convex parts (typical, embedded indoor): ``cat.fields.contact_sdf`` of
+    the mesh; voxel scenes (procedural, re-meshed crops: ``cat.terrain.mujoco_export.uses_voxels``): d itself."""
+    bank = scenes.bank
+    if bank.contact_data is not None and getattr(bank, "contact_band", None) == cfg.band:
+        return
+    t0, n = time.perf_counter(), len(scenes.scenes)
+    for s, scene in enumerate(scenes.scenes):
+        d = bank.scene_sdf(s)
+        if uses_voxels(scene):  # the physics collides with the voxel solid, whose SDF d is (surface on voxel faces)
+            bank.set_contact_sdf(s, d)
+        else:  # convex parts of the mesh
+            had_mesh = "mesh" in scene.__dict__  # a loaded scene reads its mesh on first use: drop it again after
+            mesh = scene.mesh
+            bank.set_contact_sdf(s, contact_sdf(mesh, bank.layouts[s].grid, d, cfg.band) if len(mesh.faces) else d)
+            if not had_mesh:
+                del scene.mesh
+        if (s + 1) % 50 == 0 or s + 1 == n:
+            log.info("contact SDF: %d / %d scenes (%.0f s)", s + 1, n, time.perf_counter() - t0)
+    bank.contact_band = cfg.band
+
+
 def field_model(robot: RobotCfg) -> mujoco.MjModel:
     """The one model of ``sim.obstacles=field``: robot + floor + the env sensors + the body pose sensors."""
     return build_env_model(robot, lambda spec: add_body_pose_sensors(spec, robot))
@@ -343,14 +381,17 @@ def field_contact_for(env: TraversalEnv, model: mujoco.MjModel, cfg: FieldContac
         model, env.robot, cfg or FieldContactCfg(), env.device, env.cfg.ghost_parts, env.cfg.ghost_obstacles
     )
     fc.sensor_columns(env.sim.sensors, env.sim.substep_columns)
+    if fc.cfg.sdf == "mesh":
+        fill_contact_sdf(env.scenes, fc.cfg)
     log.info(
         "sim.obstacles=field: one floor-only model for %d scene(s); contact where the SDF < %.3f m at %d points "
-        "on %d bodies (spacing %.3f m), judged %s",
+        "on %d bodies (spacing %.3f m) of the %s SDF, judged %s",
         len(env.scenes.scenes),
         fc.cfg.margin,
         fc.num_points,
         len(fc.bodies),
         fc.cfg.spacing,
+        "contact (exact near the meshes)" if fc.cfg.sdf == "mesh" else "fields'",
         "at every physics substep" if fc.cfg.substeps else "once per control step",
     )
     return fc

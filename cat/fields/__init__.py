@@ -8,6 +8,7 @@
 from cat.fields._wp import init_warp
 from cat.fields.bank import QUERY_CHANNELS, FieldBank, FieldSample, SceneLayout, bank_bytes
 from cat.fields.config import FieldCfg, StaleFieldError
+from cat.fields.contact_sdf import contact_sdf
 from cat.fields.field import CHANNELS, Field, build_field, build_fields
 from cat.fields.geodesic import geodesic_distance
 from cat.fields.grid import Grid
@@ -29,6 +30,7 @@ __all__ = [
     "Grid",
     "build_field",
     "build_fields",
+    "contact_sdf",
     "field_reward",
     "geodesic_distance",
     "humanoid_pf",

@@ -188,6 +188,7 @@ class FieldBank:
         self.scene_origin = torch.tensor([lay.grid.origin for lay in layouts], dtype=torch.float32, device=dev)
         self.scene_voxel = torch.tensor([lay.grid.voxel for lay in layouts], dtype=torch.float32, device=dev)
         self.goals = torch.zeros(len(field_scene), 3, dtype=torch.float32, device=dev)
+        self.contact_data: torch.Tensor | None = None  # per-scene contact SDF (set_contact_sdf), one value per voxel
         self._inv_voxel = (1.0 / self.scene_voxel).contiguous()
         self._unfilled = set(range(len(layouts)))
         self._wp_device = get_device("cpu" if dev.type == "cpu" else f"cuda:{dev.index or 0}")
@@ -207,8 +208,9 @@ class FieldBank:
 
     @property
     def nbytes(self) -> int:
-        """Bytes of field storage (both buffers)."""
-        return self.scene_data.nbytes + self.goal_data.nbytes
+        """Bytes of field storage (both buffers, and the contact SDF once set)."""
+        extra = 0 if self.contact_data is None else self.contact_data.nbytes
+        return self.scene_data.nbytes + self.goal_data.nbytes + extra
 
     def scene_grid(self, s: int) -> Grid:
         """Grid of scene ``s`` as placed in the bank (its origin includes any offset given at fill time)."""
@@ -276,6 +278,22 @@ class FieldBank:
             raise ValueError(f"field grid {f.grid.shape} does not match scene {s}'s {self.layouts[s].grid.shape}")
         self._field_view(i).copy_(self.storage.encode_force(torch.from_numpy(np.ascontiguousarray(f.force))))
         self.goals[i] = torch.as_tensor(np.asarray(f.goal) + np.asarray(offset), dtype=torch.float32)
+
+    def scene_sdf(self, s: int) -> np.ndarray:
+        """(nx, ny, nz) float32 copy of scene ``s``'s d."""
+        return self._scene_view(s)[..., 0].float().cpu().numpy()
+
+    def set_contact_sdf(self, s: int, d: np.ndarray) -> None:
+        """Scene ``s``'s contact SDF (its grid's shape): what :meth:`min_sdf_on_bodies` reads with ``contact=True``
+        (``cat.fields.contact_sdf``). The first call allocates it for every scene as a copy of their d."""
+        grid = self.layouts[s].grid
+        if tuple(d.shape) != tuple(grid.shape):
+            raise ValueError(f"scene {s}: contact SDF of shape {tuple(d.shape)}, the scene's grid is {grid.shape}")
+        if self.contact_data is None:
+            self._check_ready()
+            self.contact_data = self.scene_data.view(-1, len(SCENE_CHANNELS))[:, 0].clone()
+        o = int(self.scene_offset[s])
+        self.contact_data[o : o + grid.num_voxels].copy_(torch.from_numpy(np.ascontiguousarray(d)).reshape(-1))
 
     @classmethod
     def build(
@@ -402,14 +420,18 @@ class FieldBank:
         bodies: BodyPoints,
         cull: bool = True,
         thread_per_body: bool | None = None,
+        contact: bool = False,
     ) -> torch.Tensor:
         """(N, B) smallest d over each body's points of ``bodies``, posed by ``pos`` (N, B, 3) and unit ``quat``
         (N, B, 4; w, x, y, z), in fields ``field_idx`` (N,): one fused kernel (:mod:`cat.fields.body_points`).
 
         +inf where every point of the body lies outside its grid box or in a culled group (``cull=False``: none
         is culled). Interpolation and out-of-grid rule are :meth:`query`'s. ``thread_per_body``: one kernel thread
-        per (world, body) instead of per world (default: on CUDA only; the result is the same)."""
+        per (world, body) instead of per world (default: on CUDA only; the result is the same). ``contact``: read
+        the contact SDF (:meth:`set_contact_sdf`) instead of d."""
         self._check_ready()
+        if contact and self.contact_data is None:
+            raise RuntimeError("field bank: min_sdf_on_bodies(contact=True) but no contact SDF was set")
         n, nb = pos.shape[:2]
         if pos.shape != (n, bodies.num_bodies, 3) or quat.shape != (n, nb, 4) or field_idx.shape != (n,):
             raise ValueError(f"pos {tuple(pos.shape)} / quat {tuple(quat.shape)} / field_idx {tuple(field_idx.shape)}")
@@ -423,8 +445,10 @@ class FieldBank:
             lo, hi = int(idx.min()), int(idx.max())
             if lo < 0 or hi >= self.num_fields:
                 raise IndexError(f"field_idx out of range [0, {self.num_fields}): min {lo}, max {hi}")
-        kernel = min_sdf_kernel(self._wp_scalar)
+        kernel = min_sdf_kernel(self._wp_scalar, 1 if contact else len(SCENE_CHANNELS))
         scene_ptr, _, meta = self._pointers()
+        if contact:  # the same element offsets, one value per voxel
+            scene_ptr = (self.contact_data.data_ptr() - self._ptr_shift * self.contact_data.element_size()) % 2**64
         # worlds of one scene in a row (they read the same grid: cache hits on the CPU); on the CPU one thread per
         # world (few thread starts), on CUDA one per (world, body)
         order = torch.argsort(idx, stable=True).to(torch.int32)

@@ -77,9 +77,10 @@ class BodyPoints:
 
 
 @functools.cache
-def min_sdf_kernel(scalar: type) -> wp.Kernel:
-    """The fused (world, body) min-SDF kernel for bank storage type ``scalar`` (float32 / float16); math in float32."""
-    v4 = wp.types.vector(length=4, dtype=scalar)
+def min_sdf_kernel(scalar: type, channels: int = 4) -> wp.Kernel:
+    """The fused (world, body) min-SDF kernel for bank storage type ``scalar`` (float32 / float16) whose scene
+    blocks hold ``channels`` values per voxel, d first (4: the bank's d, ∇d; 1: its contact SDF); math in float32."""
+    v4 = wp.types.vector(length=channels, dtype=scalar)
     scene_bytes = wp.types.type_size_in_bytes(v4)
 
     @wp.func

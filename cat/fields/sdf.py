@@ -361,8 +361,9 @@ def sdf_from_mesh(mesh: trimesh.Trimesh, grid: Grid, device: str | None = None) 
     return sdf_from_mesh_wp(mesh, grid, get_device(device)).numpy()
 
 
-def mesh_sdf_at(mesh: trimesh.Trimesh, points, device: str | None = None) -> np.ndarray:
-    """Signed distance (m) of a triangle mesh at arbitrary points (M, 3)."""
+def mesh_sdf_at(mesh: trimesh.Trimesh, points, device: str | None = None, max_dist: float = FAR) -> np.ndarray:
+    """Signed distance (m) of a triangle mesh at arbitrary points (M, 3); ``FAR`` where no surface lies within
+    ``max_dist`` (a smaller bound makes the search cheaper)."""
     dev = get_device(device)
     pts = np.asarray(points, dtype=np.float32).reshape(-1, 3)
     wmesh = _wp_mesh(mesh, dev)
@@ -370,7 +371,7 @@ def mesh_sdf_at(mesh: trimesh.Trimesh, points, device: str | None = None) -> np.
     wp.launch(
         _mesh_points_kernel,
         dim=len(pts),
-        inputs=[wmesh.id, wp.array(pts, dtype=wp.vec3, device=dev), float(FAR), out],
+        inputs=[wmesh.id, wp.array(pts, dtype=wp.vec3, device=dev), float(max_dist), out],
         device=dev,
     )
     return out.numpy()

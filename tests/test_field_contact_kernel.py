@@ -215,15 +215,15 @@ def test_bench_field_contact_prints_its_lines(capsys):
     args = ["field_contact", "--envs", "8", "--scenes", "2", "--warmup", "2", "--steps", "1", "--repeat", "1"]
     assert bench.main(args) == 0
     lines = capsys.readouterr().out.strip().splitlines()
-    assert re.fullmatch(r"case=contact_sdf scenes=2 env_build_s=[\d.]+ contact_sdf_s_per_scene=[\d.]+", lines[-10])
+    assert re.fullmatch(r"case=contact_sdf scenes=2 env_build_s=[\d.]+ contact_sdf_s_per_scene=[\d.]+", lines[-13])
     pattern = (
-        r"case=field_contact impl=(torch|fused|contact) placement=(start|anywhere|course) envs=8 scenes=2 "
+        r"case=field_contact impl=(torch|fused|contact|substeps) placement=(start|anywhere|course) envs=8 scenes=2 "
         r"points=(\d+) contact_frac=([\d.]+) ms_per_step=([\d.]+) cpu_ms_per_step=([\d.]+)"
     )
-    found = [re.fullmatch(pattern, line) for line in lines[-9:]]
+    found = [re.fullmatch(pattern, line) for line in lines[-12:]]
     assert all(found), lines
     assert [(m.group(1), m.group(2)) for m in found] == [
-        (impl, place) for place in ("start", "anywhere", "course") for impl in ("torch", "fused", "contact")
+        (impl, place) for place in ("start", "anywhere", "course") for impl in ("torch", "fused", "contact", "substeps")
     ]
-    for torch_line, fused_line in zip(found[::3], found[1::3], strict=True):  # the same judgement on d
+    for torch_line, fused_line in zip(found[::4], found[1::4], strict=True):  # the same judgement on d
         assert torch_line.group(4) == fused_line.group(4)

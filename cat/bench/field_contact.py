@@ -8,11 +8,11 @@ culled), ``anywhere`` (root at a uniform spot of its scene's grid box) and ``cou
 typical start line, |y| <= 0.3 m: among the obstacles, most robots in contact, the worst case). For each,
 ``FieldContact.judge`` runs with the torch reference (``impl=torch``: torch transforms + ``FieldBank.query`` per
 point) and the fused Warp kernel (``impl=fused``), both on the fields' d, and the fused kernel on the contact SDF
-(``impl=contact``, the default judgement ``sim.field_contact.sdf=mesh``), taking turns call by call. One
-instant per call: the default judgement makes ``decimation`` (4) of them per control step, one per substep.
+(``impl=contact``, the default ``sim.field_contact.sdf=mesh``), one instant per call, and the default judgement of a
+control step (``impl=substeps``: the contact SDF at the 4 substeps' poses), taking turns call by call.
 The contact SDF's one-time cost (computed when the env is built) is printed as ``case=contact_sdf``.
 
-Prints one line per (placement, impl): ``case=field_contact impl=<torch|fused|contact> placement=<start|anywhere|course>
+Prints one line per (placement, impl): ``case=field_contact impl=<torch|fused|contact|substeps> placement=<...>
 envs=<n> scenes=<n> points=<n> contact_frac=<x> ms_per_step=<x> cpu_ms_per_step=<x>`` (medians over steps ×
 ``--repeat``; wall clock, and the process's CPU time, which a busy machine inflates less).
 """
@@ -34,7 +34,7 @@ from cat.envs.traversal_env import TraversalEnv
 from cat.terrain import TYPICAL_KINDS, make_typical
 
 log = logging.getLogger(__name__)
-IMPLS = ("torch", "fused", "contact")
+IMPLS = ("torch", "fused", "contact", "substeps")
 PLACEMENTS = ("start", "anywhere", "course")
 EDGE = 0.3
 """m: robots placed ``anywhere`` keep their root this far inside the grid box (in x and y)."""
@@ -42,24 +42,28 @@ COURSE_X = (0.6, 2.4)
 """m past the grid box's low x (-0.5 m in a typical scene): root x 0.1-1.9 m, among the obstacles."""
 
 
-def snapshots(env: TraversalEnv, warmup: int, steps: int, seed: int) -> list[torch.Tensor]:
-    """Sensor rows (n, nsensordata) of the last ``steps`` of ``warmup + steps`` random-action control steps."""
+Rows = tuple[torch.Tensor, torch.Tensor]
+"""A control step's sensor rows (n, nsensordata) and substep pose rows (n, decimation, k)."""
+
+
+def snapshots(env: TraversalEnv, warmup: int, steps: int, seed: int) -> list[Rows]:
+    """The rows of the last ``steps`` of ``warmup + steps`` random-action control steps."""
     g = torch.Generator().manual_seed(seed)
     out = []
     for i in range(warmup + steps):
         env.step(0.5 * torch.randn(env.num_envs, env.num_actions, generator=g))
         if i >= warmup:
-            out.append(env.sim.sensordata.to(torch.float32).clone())
+            out.append((env.sim.sensordata.float().clone(), env.sim.substep_sensordata.float().clone()))
     return out
 
 
-def moved(
-    fc: FieldContact, sens: torch.Tensor, bank, idx: torch.Tensor, placement: str, g: torch.Generator
-) -> torch.Tensor:
-    """``sens`` with every robot's body positions shifted by one xy offset per world (a rigid move), its root to a
-    uniform spot of ``placement`` (``anywhere`` / ``course``, see the module docstring) in its field's grid box."""
+def moved(fc: FieldContact, rows: Rows, bank, idx: torch.Tensor, placement: str, g: torch.Generator) -> Rows:
+    """``rows`` with every robot's body positions shifted by one xy offset per world (a rigid move, the same at
+    every substep), its root to a uniform spot of ``placement`` (``anywhere`` / ``course``, see the module
+    docstring) in its field's grid box."""
     if placement == "start":
-        return sens
+        return rows
+    sens, sub = rows
     cols = fc.pose_columns[:, :3]
     pos = sens[:, cols]  # (n, B, 3)
     lo, hi = bank.field_bounds(idx)
@@ -71,35 +75,36 @@ def moved(
         target = torch.stack((x, 0.5 * (lo[:, 1] + hi[:, 1]) + 0.6 * (u[:, 1] - 0.5)), dim=1)
     shift = torch.zeros(len(idx), 1, 3)
     shift[:, 0, :2] = target - pos[:, 0, :2]
-    out = sens.clone()
+    out, out_sub = sens.clone(), sub.clone()
     out[:, cols] = pos + shift
-    return out
+    sub_cols = fc._sub_cols[:, :3]
+    out_sub[:, :, sub_cols] = sub[:, :, sub_cols] + shift[:, None]
+    return out, out_sub
 
 
 def time_judge(
-    fc: FieldContact, rows: list[torch.Tensor], bank, idx: torch.Tensor, impls: tuple[str, ...], repeat: int
+    fc: FieldContact, rows: list[Rows], bank, idx: torch.Tensor, impls: tuple[str, ...], repeat: int
 ) -> dict[str, tuple[float, float, float]]:
     """Per impl: (median wall ms, median process CPU ms per ``judge`` call, fraction of worlds in contact) over
     ``rows`` × ``repeat``. The impls take turns call by call, so a load that varies (a busy machine) falls on both
     alike; CPU time counts every thread's work and not the time other processes hold the cores."""
     wall, cpu, hits = ({i: [] for i in impls} for _ in range(3))
 
-    def use(impl: str) -> None:
-        fc.fused, fc.cfg.sdf = impl != "torch", "mesh" if impl == "contact" else "field"
+    def judge(impl: str, r: Rows) -> torch.Tensor:
+        fc.fused, fc.cfg.sdf = impl != "torch", "mesh" if impl in ("contact", "substeps") else "field"
+        return fc.judge(r[0], bank, idx, r[1] if impl == "substeps" else None)[0]
 
     for i in impls:  # warm-up: kernel load, allocations
-        use(i)
-        fc.judge(rows[0], bank, idx)
+        judge(i, rows[0])
     for _ in range(repeat):
-        for sens in rows:
+        for r in rows:
             for i in impls:
-                use(i)
                 t0, c0 = time.perf_counter(), time.process_time()
-                collision, _ = fc.judge(sens, bank, idx)
+                collision = judge(i, r)
                 wall[i].append((time.perf_counter() - t0) * 1e3)
                 cpu[i].append((time.process_time() - c0) * 1e3)
                 hits[i].append(float(collision.float().mean()))
-    use("contact")
+    fc.fused, fc.cfg.sdf = True, "mesh"
     return {i: (float(np.median(wall[i])), float(np.median(cpu[i])), float(np.mean(hits[i]))) for i in impls}
 
 

@@ -49,5 +49,17 @@ step scale_env 420 python3 scripts/bench.py scale --device cuda:0 --sim warp --p
 # the same at 16k envs, where the flat task fills the GPU (2026-12-04: 1024 envs gave 0.72, the GPU far from full)
 step scale_env16k 420 python3 scripts/bench.py scale --device cuda:0 --sim warp --per-world --physics-scenes 0 \
   --envs 16384
+# issue 28 at GPU scale (docs/gpu.md, "Training on a lent GPU"): the scenes are built there (data/hybrid's command;
+# its 2.9 GB do not travel), then PPO continues the best hybrid teacher (hybrid_starts' baseline arm, 30.5 M env
+# steps) at 16k envs for TRAIN_MIN minutes in floor-only worlds with field-judged contact (one model for every
+# world); the run folder lands in $OUT/train_hybrid. GPU_DEVICE / TRAIN_ENVS / TRAIN_MIN / HYBRID_SCENES shrink it
+# for a check on the CPU (tests/test_gpu_scripts.py).
+GPU_DEVICE="${GPU_DEVICE:-cuda:0}"
+step hybrid_scenes 300 python3 scripts/gen_scenes.py out=/tmp/data/hybrid data=all typical_variants=0 \
+  ${HYBRID_SCENES:-indoor=40 procedural=40} seed=0 field_dtype=float16
+step train_hybrid 600 python3 scripts/train.py task=scenes init=checkpoints/hybrid_starts_baseline/model_406.pt \
+  task.scene_dir=/tmp/data/hybrid task.episodes.mode=free algo.num_learning_epochs=5 sim=warp \
+  sim.device="$GPU_DEVICE" sim.obstacles=field num_envs="${TRAIN_ENVS:-16384}" max_minutes="${TRAIN_MIN:-7}" \
+  run_dir="$OUT/train_hybrid"
 echo "failed steps: $fails"
 exit "$fails"

@@ -70,6 +70,16 @@ def typical_env() -> TraversalEnv:
     return TraversalEnv(EnvCfg(num_envs=8), scenes=sset, obstacles="field")
 
 
+def copy_bank(src: FieldBank, dtype: str = "float32") -> FieldBank:
+    """A bank of ``src``'s scenes, fields and placement in storage ``dtype`` (no contact SDF)."""
+    bank = FieldBank(src.layouts, dtype)
+    bank.scene_data.copy_(src.scene_data)
+    bank.goal_data.copy_(src.goal_data)
+    bank.scene_origin.copy_(src.scene_origin)
+    bank._unfilled.clear()
+    return bank
+
+
 def random_poses(bank: FieldBank, idx: torch.Tensor, nb: int, g: torch.Generator, spill: float = 0.3):
     """Body positions uniform over each field's grid box grown by ``spill`` m (some points out of the grid), and
     uniformly random orientations."""
@@ -85,12 +95,7 @@ def test_random_poses_judge_the_same(typical_env, dtype):
     env = typical_env
     fc = env.field_contact
     src = env.field_source.bank
-    bank = src if dtype == "float32" else FieldBank(src.layouts, "float16")
-    if dtype == "float16":
-        bank.scene_data.copy_(src.scene_data)
-        bank.goal_data.copy_(src.goal_data)
-        bank.scene_origin.copy_(src.scene_origin)
-        bank._unfilled.clear()
+    bank = src if dtype == "float32" else copy_bank(src, "float16")
     g = torch.Generator().manual_seed(0)
     idx = torch.randint(0, bank.num_fields, (512,), generator=g)
     pos, quat = random_poses(bank, idx, len(fc.bodies), g)
@@ -150,11 +155,7 @@ def test_contact_sdf_is_read_in_place_of_d(typical_env):
         changed = (c - d).abs() > 1e-6
         assert changed.any() and (d[changed].abs() < fc.cfg.band).all()
         assert (c - d)[changed].abs().quantile(0.9) < 0.03
-    bank = FieldBank(src.layouts)
-    bank.scene_data.copy_(src.scene_data)
-    bank.goal_data.copy_(src.goal_data)
-    bank.scene_origin.copy_(src.scene_origin)
-    bank._unfilled.clear()
+    bank = copy_bank(src)
     g = torch.Generator().manual_seed(7)
     idx = torch.randint(0, bank.num_fields, (200,), generator=g)
     pos, quat = random_poses(bank, idx, len(fc.bodies), g)

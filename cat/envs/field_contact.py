@@ -45,9 +45,9 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 OBSTACLE_MODES = ("physical", "field")
+"""``sim.obstacles``: obstacle geometry in the physics worlds (``physical``) or only as SDF (``field``)."""
 CONTACT_SDFS = ("mesh", "field")
 """``sim.field_contact.sdf``: which SDF the judgement reads (``FieldContactCfg.sdf``)."""
-"""``sim.obstacles``: obstacle geometry in the physics worlds (``physical``) or only as SDF (``field``)."""
 POSE_SENSOR_PREFIX = "field_contact_pose_"
 CULL_SLACK = 0.06
 """m: extra distance before a geom's bounding sphere is considered clear (the interpolated SDF of a 4 cm voxel
@@ -217,6 +217,7 @@ class FieldContact:
         self.fused = True
         """Judge with the fused Warp kernel (:meth:`FieldBank.min_sdf_on_bodies`); False: the torch reference."""
         self._cols: torch.Tensor | None = None
+        self._sub_cols: torch.Tensor | None = None  # the same columns in substep_sensordata (sensor_columns)
         self._packed: dict[torch.device, BodyPoints] = {}
 
     def sensor_columns(self, sensors: dict, substep_columns: Sequence[int] = ()) -> None:
@@ -348,7 +349,7 @@ def fill_contact_sdf(scenes, cfg: FieldContactCfg) -> None:
     physics worlds collide with. Scenes of convex parts (typical, embedded indoor): ``cat.fields.contact_sdf`` of
     the mesh; voxel scenes (procedural, re-meshed crops: ``cat.terrain.mujoco_export.uses_voxels``): d itself."""
     bank = scenes.bank
-    if bank.contact_data is not None and getattr(bank, "contact_band", None) == cfg.band:
+    if bank.contact_data is not None and bank.contact_band == cfg.band:
         return
     t0, n = time.perf_counter(), len(scenes.scenes)
     for s, scene in enumerate(scenes.scenes):

@@ -189,6 +189,7 @@ class FieldBank:
         self.scene_voxel = torch.tensor([lay.grid.voxel for lay in layouts], dtype=torch.float32, device=dev)
         self.goals = torch.zeros(len(field_scene), 3, dtype=torch.float32, device=dev)
         self.contact_data: torch.Tensor | None = None  # per-scene contact SDF (set_contact_sdf), one value per voxel
+        self.contact_band: float | None = None  # the band it was made exact in (cat.envs.field_contact)
         self._inv_voxel = (1.0 / self.scene_voxel).contiguous()
         self._unfilled = set(range(len(layouts)))
         self._wp_device = get_device("cpu" if dev.type == "cpu" else f"cuda:{dev.index or 0}")

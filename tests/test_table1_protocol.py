@@ -17,20 +17,36 @@ ROWS = ["ASTraversal", "Humanoid Parkour", "Ours w/o OBS_field", "Ours w/o R_fie
 EXPERIMENT = Path(__file__).resolve().parents[1] / "configs" / "experiment" / "table1.yaml"
 
 
+def _row_cell(table, row: str, column: str = "crouch-pass") -> str:
+    return table.methods[row][column][0]
+
+
 def test_every_row_has_the_same_budget_scenes_prior_and_trials():
+    """One policy per (method, type): in each column every row trains the same task from the same prior."""
     exp = load_experiment("table1")
     table = exp.tables["table1"]
     assert table.equal_budget == ROWS
     assert list(table.methods)[:5] == ROWS and "Ours (specialists)" in table.methods
+    columns = {tuple(table.methods[r]) for r in ROWS}
+    assert columns == {("crouch-pass",)}
     plan = Plan(exp, root="/nonexistent")
-    units = [u for u in plan.units.values() if u.cell.name in {table.methods[r][0] for r in ROWS}]
+    names = {_row_cell(table, r) for r in ROWS}
+    units = [u for u in plan.units.values() if u.cell.name in names]
     assert {u.iterations for u in units} == {1018}  # 25 M env steps at 1024 envs x 24 steps
     assert {u.inputs["init"] for u in units} == {"checkpoints/flat/model_770.pt"}
-    seeds = {r: exp.cells[table.methods[r][0]].seeds for r in ROWS}
+    assert {exp.cells[n].task for n in names} == {"crouch_pass"}
+    seeds = {r: exp.cells[_row_cell(table, r)].seeds for r in ROWS}
     assert seeds["Ours"] == [0, 1] and seeds["Ours w/o OBS_field"] == [0, 1]
     assert all(s == [0] for r, s in seeds.items() if r not in ("Ours", "Ours w/o OBS_field"))
-    methods = {exp.cells[table.methods[r][0]].method for r in ROWS}
+    methods = {exp.cells[_row_cell(table, r)].method for r in ROWS}
     assert methods == {"ours", "wo_obs_field", "wo_r_field", "astraversal", "humanoid_parkour"}
+
+
+def test_the_first_protocol_stays_loadable_as_its_record():
+    """experiment=table1_all_types: one policy per method over all eight types (the 0 % finding of 2026-12-04)."""
+    exp = load_experiment("table1_all_types")
+    assert exp.cells["ours"].task == "typical" and exp.cells["ours"].env_steps == 25_000_000
+    assert exp.tables["table1"].equal_budget == ["Ours"]
 
 
 def _variant(tmp_path, edit) -> str:
@@ -44,18 +60,22 @@ def _variant(tmp_path, edit) -> str:
 @pytest.mark.parametrize(
     ("edit", "message"),
     [
-        (lambda r: r["cells"]["astraversal"].update(overrides=["task.scene_variants=5"]),
-         r"row 'ASTraversal' \(cell astraversal\) differs from .* in overrides"),
-        (lambda r: r["cells"]["wo_r_field"].update(env_steps=30_000_000),
-         r"row 'Ours w/o R_field' \(cell wo_r_field\) differs .* in env_steps: 30000000 vs 25000000"),
-        (lambda r: r["cells"]["humanoid_parkour"].update(init="checkpoints/flat/model_501.pt"),
+        (lambda r: r["cells"]["astraversal_crouch_pass"].update(overrides=["task.scene_variants=5"]),
+         r"column 'crouch-pass': row 'ASTraversal' \(cell astraversal_crouch_pass\) differs from .* in overrides"),
+        (lambda r: r["cells"]["wo_r_field_crouch_pass"].update(env_steps=30_000_000),
+         r"row 'Ours w/o R_field' \(cell wo_r_field_crouch_pass\) differs .* in env_steps: 30000000 vs 25000000"),
+        (lambda r: r["cells"]["humanoid_parkour_crouch_pass"].update(init="checkpoints/flat/model_501.pt"),
          r"row 'Humanoid Parkour' .* in init"),
-        (lambda r: r["cells"]["humanoid_parkour"].update(task="hurdle_pass"), r"row 'Humanoid Parkour' .* in task"),
-        (lambda r: r["cells"]["astraversal"].update(seeds=[1]), r"trains seeds \[1\], not a prefix of \[0, 1\]"),
-        (lambda r: (r["cells"]["ours"].pop("env_steps"), r["cells"]["ours"].update(minutes=60)),
-         r"row 'Ours' \(cell ours\) has a minutes budget"),
-        (lambda r: r["tables"]["table1"]["methods"].update({"Ours": {"hurdle-pass": ["ours"]}}),
-         r"row 'Ours' must be one cell"),
+        (lambda r: r["cells"]["humanoid_parkour_crouch_pass"].update(task="hurdle_pass"),
+         r"row 'Humanoid Parkour' .* in task"),
+        (lambda r: r["cells"]["astraversal_crouch_pass"].update(seeds=[1]),
+         r"trains seeds \[1\], not a prefix of \[0, 1\]"),
+        (lambda r: (r["cells"]["ours_crouch_pass"].pop("env_steps"), r["cells"]["ours_crouch_pass"].update(minutes=60)),
+         r"row 'Ours' \(cell ours_crouch_pass\) has a minutes budget"),
+        (lambda r: r["tables"]["table1"]["methods"].update({"Ours": ["ours_crouch_pass"]}),
+         r"row 'Ours' \(one cell\) is not shaped like row 'ASTraversal' \(types \['crouch-pass'\]\)"),
+        (lambda r: r["tables"]["table1"]["methods"].update({"Ours": {"crouch-pass": ["ours_crouch_pass", "wo_r_field_crouch_pass"]}}),
+         r"row 'Ours', column 'crouch-pass', must be one cell"),
         (lambda r: r["tables"]["table1"]["equal_budget"].append("Ours (generalist)"),
          r"equal_budget names 'Ours \(generalist\)', not a row"),
     ],

@@ -252,24 +252,42 @@ EQUAL_KEYS = ("task", "algo", "init", "overrides", "iterations", "env_steps", "l
 
 
 def check_equal_budget(exp: Experiment, table: Table) -> None:
-    """The rows of ``table.equal_budget`` are one cell each, trained alike but for the method: same task (scenes,
-    curriculum), algo, init (prior), overrides, budget and legs, and seeds that are prefixes of one list (seed 0
-    for every row, more seeds for some); a minutes budget is no equal budget (machines differ). The trials are the
-    table's, the same for every row. One ``ExperimentError`` naming the row and the difference."""
+    """The rows of ``table.equal_budget`` are trained alike but for the method. A row is one cell (one policy per
+    method over every type) or a mapping type -> one cell (one policy per (method, type)); every row has the same
+    form and the same types. Per column, the rows' cells share task (scenes, curriculum), algo, init (prior),
+    overrides, budget and legs, and their seeds are prefixes of one list (seed 0 for every row, more seeds for
+    some); a minutes budget is no equal budget (machines differ). The trials are the table's, the same for every
+    row. One ``ExperimentError`` naming the row (and column) and the difference."""
     what = f"table {table.name}: equal_budget"
-    cells: dict[str, Cell] = {}
+    columns: dict[str | None, dict[str, Cell]] = {}  # None: one cell per row plays every column
+    forms: dict[str, tuple] = {}
     for row in table.equal_budget:
         entries = table.methods[row]
-        cell = exp.cell_of(entries[0]) if isinstance(entries, list) and len(entries) == 1 else None
-        if cell is None or cell[1] is not None:
-            raise ExperimentError(
-                f"{what}: row {row!r} must be one cell (one policy per method over every type), got {entries!r}"
-            )
-        cells[row] = exp.cells[cell[0]]
-        if cells[row].minutes is not None:
-            raise ExperimentError(f"{what}: row {row!r} (cell {cell[0]}) has a minutes budget; give env_steps")
-    if not cells:
-        return
+        per_type = entries if isinstance(entries, dict) else {None: entries}
+        forms[row] = tuple(per_type)
+        for column, refs in per_type.items():
+            cell = exp.cell_of(refs[0]) if isinstance(refs, list) and len(refs) == 1 else None
+            if cell is None or cell[1] is not None:
+                where = f"row {row!r}" + (f", column {column!r}," if column else "")
+                raise ExperimentError(
+                    f"{what}: {where} must be one cell (a policy per method, or per method and type), got {refs!r}"
+                )
+            columns.setdefault(column, {})[row] = exp.cells[cell[0]]
+            if exp.cells[cell[0]].minutes is not None:
+                raise ExperimentError(f"{what}: row {row!r} (cell {cell[0]}) has a minutes budget; give env_steps")
+    if len(set(forms.values())) > 1:
+        first = next(iter(forms))
+        odd = next(r for r, f in forms.items() if f != forms[first])
+        shape = {
+            r: "one cell" if f == (None,) else f"types {list(f)}" for r, f in ((first, forms[first]), (odd, forms[odd]))
+        }
+        raise ExperimentError(f"{what}: row {odd!r} ({shape[odd]}) is not shaped like row {first!r} ({shape[first]})")
+    for column, cells in columns.items():
+        _check_column(what + (f": column {column!r}" if column else ""), cells)
+
+
+def _check_column(what: str, cells: dict[str, Cell]) -> None:
+    """The cells of one column (row -> cell) differ only in method; seeds are prefixes of one list."""
     longest = max((c.seeds for c in cells.values()), key=len)
     for key in EQUAL_KEYS:
         values = {row: _comparable_value(cell, key) for row, cell in cells.items()}

@@ -41,6 +41,41 @@ def test_scene_draws_respect_levels():
     assert set(picks[400:].tolist()) == {3, 4}
 
 
+def test_group_weights_set_each_groups_share_of_a_levels_draws():
+    """One typical scene beside three hybrid ones at a level: weights 1 : 1 give it half the draws, not a quarter."""
+    d = torch.tensor([0.0, 0.0, 0.0, 0.0, 0.9])
+    groups = ["crouch-pass", "indoor", "indoor", "procedural", "indoor"]
+    n = 20_000
+    uniform = DifficultyCurriculum(d, n, CurriculumCfg(num_levels=5), groups)
+    weighted = DifficultyCurriculum(d, n, CurriculumCfg(num_levels=5, group_weights={"crouch-pass": 2.0}), groups)
+    share = {}
+    for name, cur in (("uniform", uniform), ("weighted", weighted)):
+        picks = cur.pick_scenes(torch.arange(n), torch.Generator().manual_seed(0))
+        assert set(picks.tolist()) <= {0, 1, 2, 3}  # level 0 only
+        share[name] = torch.bincount(picks, minlength=5).double() / n
+    assert share["uniform"][0] == pytest.approx(0.25, abs=0.02)
+    # crouch-pass : indoor : procedural = 2 : 1 : 1 of the draws; indoor's two scenes split their group's share
+    assert share["weighted"][0] == pytest.approx(0.5, abs=0.02)
+    assert share["weighted"][1] == pytest.approx(0.125, abs=0.02) and share["weighted"][3] == pytest.approx(
+        0.25, abs=0.02
+    )
+    weighted.level[:] = 4
+    assert set(weighted.pick_scenes(torch.arange(100), torch.Generator()).tolist()) == {4}
+
+
+@pytest.mark.parametrize(
+    ("weights", "groups", "message"),
+    [
+        ({"crouch_pass": 2.0}, ["crouch-pass", "indoor"], r"names \['crouch_pass'\], not a scene group"),
+        ({"indoor": 0.0}, ["crouch-pass", "indoor"], r"finite and > 0, got \{'indoor': 0.0\}"),
+        ({"indoor": 1.0}, None, "needs each scene's group"),
+    ],
+)  # fmt: skip
+def test_bad_group_weights_are_refused_naming_them(weights, groups, message):
+    with pytest.raises(ValueError, match=message):
+        DifficultyCurriculum(torch.tensor([0.0, 0.5]), 2, CurriculumCfg(group_weights=weights), groups)
+
+
 def test_state_round_trip_and_bad_resume():
     cur = DifficultyCurriculum(DIFF, num_envs=4, cfg=CurriculumCfg(num_levels=5, start_level=2))
     assert cur.level.tolist() == [2, 2, 2, 2]
@@ -61,6 +96,23 @@ def test_env_moves_envs_between_scenes_by_level():
     env.reset_idx(torch.arange(4))
     assert (scenes.scene_of_env == 1).all()
     assert env.training_state()["curriculum"]["level"].tolist() == [4, 4, 4, 4]
+
+
+def test_env_draws_scenes_by_group_weight():
+    """The env hands each scene's group to the curriculum: crouch-pass weighted 3 : 1 gets ~3/4 of the resets."""
+    scenes = SceneSet.typical(["hurdle-crouch", "crouch-pass"], num_envs=64, variants=1)  # one level-0 scene each
+    cfg = EnvCfg(num_envs=64, scene_kind="typical")
+    cfg.curriculum.group_weights = {"crouch-pass": 3.0}
+    env = TraversalEnv(cfg, sim="mujoco", scenes=scenes, seed=1)
+    counts = torch.zeros(2)
+    for _ in range(8):
+        env.reset_idx(torch.arange(64))
+        counts += torch.bincount(scenes.groups_of_envs(), minlength=2)
+    share = counts[scenes.group_names.index("crouch-pass")] / counts.sum()
+    assert share == pytest.approx(0.75, abs=0.06)
+    cfg.curriculum.group_weights = {"side_pass": 1.0}
+    with pytest.raises(ValueError, match=r"names \['side_pass'\], not a scene group of this set"):
+        TraversalEnv(cfg, sim="mujoco", scenes=SceneSet.typical("crouch-pass", num_envs=2, variants=1), seed=1)
 
 
 def test_warmup_difficulties_take_the_lowest_levels():

@@ -74,7 +74,8 @@ def _variant(tmp_path, edit) -> str:
          r"row 'Ours' \(cell ours_crouch_pass\) has a minutes budget"),
         (lambda r: r["tables"]["table1"]["methods"].update({"Ours": ["ours_crouch_pass"]}),
          r"row 'Ours' \(one cell\) is not shaped like row 'ASTraversal' \(types \['crouch-pass'\]\)"),
-        (lambda r: r["tables"]["table1"]["methods"].update({"Ours": {"crouch-pass": ["ours_crouch_pass", "wo_r_field_crouch_pass"]}}),
+        (lambda r: r["tables"]["table1"]["methods"].update(
+            {"Ours": {"crouch-pass": ["ours_crouch_pass", "wo_r_field_crouch_pass"]}}),
          r"row 'Ours', column 'crouch-pass', must be one cell"),
         (lambda r: r["tables"]["table1"]["equal_budget"].append("Ours (generalist)"),
          r"equal_budget names 'Ours \(generalist\)', not a row"),

@@ -116,8 +116,11 @@ class TraversalEnv(VecEnv):
         self.device = self.sim.device
         self.field = None
         self.curriculum = None
+        if cfg.curriculum.group_weights and not (scenes is not None and cfg.curriculum.enabled):
+            raise ValueError("task.curriculum.group_weights needs a scene task with the curriculum enabled")
         if scenes is not None and cfg.curriculum.enabled:
-            self.curriculum = DifficultyCurriculum(scenes.difficulties, self.num_envs, cfg.curriculum)
+            kinds = [scenes.group_names[int(g)] for g in scenes.group_of_scene]
+            self.curriculum = DifficultyCurriculum(scenes.difficulties, self.num_envs, cfg.curriculum, kinds)
         if scenes is not None:
             scenes.set_episodes(cfg.episodes)
         self.field_source = (

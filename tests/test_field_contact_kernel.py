@@ -228,3 +228,28 @@ def test_bench_field_contact_prints_its_lines(capsys):
     ]
     for torch_line, fused_line in zip(found[::4], found[1::4], strict=True):  # the same judgement on d
         assert torch_line.group(4) == fused_line.group(4)
+
+
+def test_group_offsets_inflate_the_points(typical_env):
+    """A group's offset is subtracted from d at its points (a capsule is its axis inflated by its radius): the same
+    points packed with offsets 0 and c give results c apart, and culling with the grown cull distance changes
+    nothing."""
+    env = typical_env
+    fc, bank = env.field_contact, env.field_source.bank
+    g = torch.Generator().manual_seed(11)
+    idx = torch.randint(0, bank.num_fields, (200,), generator=g)
+    pos, quat = random_poses(bank, idx, len(fc.bodies), g)
+    groups, bodies, n = fc.geom_points, fc.geom_body.tolist(), len(fc.geom_points)
+    c = 0.03
+    cull = (fc.geom_radius - fc.geom_offset + fc.cfg.margin + CULL_SLACK).tolist()
+    plain = BodyPoints.from_groups(groups, bodies, fc.geom_centre, cull, bank.device, [0.0] * n)[0]
+    grown = BodyPoints.from_groups(groups, bodies, fc.geom_centre, [x + c for x in cull], bank.device, [c] * n)[0]
+    a = bank.min_sdf_on_bodies(idx, pos, quat, plain, cull=False)
+    b = bank.min_sdf_on_bodies(idx, pos, quat, grown, cull=False)
+    finite = torch.isfinite(a)
+    assert finite.any() and torch.equal(torch.isinf(b), ~finite)
+    torch.testing.assert_close(b[finite], a[finite] - c, rtol=0.0, atol=1e-6)
+    culled = bank.min_sdf_on_bodies(idx, pos, quat, grown, cull=True)
+    near = b < fc.cfg.margin
+    assert torch.equal(culled < fc.cfg.margin, near) and near.any()
+    assert (fc.geom_offset > 0).any()  # the G1's capsules and spheres are judged by their cores

@@ -2,11 +2,14 @@
 
 In ``field`` mode the physics worlds hold the robot and the floor only: one compiled model for every world and
 any number of scenes. Obstacles exist as the scene's signed distance d in the field bank (``cat.fields.bank``,
-d > 0 free, d < 0 inside). The robot is in contact when any of a dense set of points on the surfaces of its
-collision geoms (capsules, boxes, spheres of ``robots/g1/g1.yaml``'s ``collision_geoms``, sampled every
-``FieldContactCfg.spacing`` metres) has d < ``FieldContactCfg.margin``. The points are fixed in their body's
-frame; each step the body poses come from MuJoCo frame sensors (``add_body_pose_sensors``), so both backends
-compute them inside the simulator.
+d > 0 free, d < 0 inside). The robot is in contact when one of its collision geoms (capsules, boxes, spheres of
+``robots/g1/g1.yaml``'s ``collision_geoms``) comes closer than ``FieldContactCfg.margin`` to an obstacle. With
+``FieldContactCfg.cores`` (the default) a capsule is judged by points along its axis (every ``axis_spacing``) and a
+sphere by its centre, each at d − radius: a capsule is its axis inflated by its radius, so this is its exact
+distance wherever d is exact, edges and corners of obstacles included. Boxes and cylinders, and every geom
+without ``cores``, are judged by points on their surface (every ``spacing``) at d. The points are fixed in their
+body's frame; each step the body poses come from MuJoCo frame sensors (``add_body_pose_sensors``), so both
+backends compute them inside the simulator.
 
 Points outside their scene's field grid count as free (no obstacle is known there). To keep the query cheap,
 each collision geom is first tested at the centre of a sphere bounding its points: geoms whose centre lies farther
@@ -60,9 +63,10 @@ class FieldContactCfg:
 
     spacing: float = 0.03
     """m: largest gap between neighbouring sample points on a collision geom's surface."""
-    margin: float = 0.004
-    """m: a point with SDF below this is in contact. +4 mm: the best agreement with physical contact over
-    random-action rollouts (a calibration sample apart from the test's; docs/training.md, "Obstacles as fields")."""
+    margin: float = 0.001
+    """m: a judged shape closer than this to an obstacle (SDF below it) is in contact. +1 mm: the fewest
+    disagreements with physical contact over random-action rollouts (a calibration sample apart from the test's;
+    docs/training.md, "Obstacles as fields"); +4 mm with surface samples only (``cores=False``)."""
     substeps: bool = True
     """Judge at every physics substep (the states physical contact is counted at), not once per control step."""
     sdf: str = "mesh"
@@ -70,6 +74,11 @@ class FieldContactCfg:
     computed when the env is built); ``field``: the fields' d (4 cm occupancy voxels) for every scene."""
     band: float = DEFAULT_BAND
     """m: how far from a surface (by d) the contact SDF is exact (``sdf=mesh``)."""
+    cores: bool = True
+    """Judge capsules by their axis and spheres by their centre at d − radius (exact between surface samples);
+    False: every geom by surface samples (the judgement before 2026-12-05)."""
+    axis_spacing: float = 0.01
+    """m: largest gap between neighbouring points on a capsule's axis (``cores``)."""
 
 
 def check_obstacles(mode: str) -> str:
@@ -157,6 +166,20 @@ def geom_surface_points(gtype: int, size: np.ndarray, spacing: float) -> np.ndar
     raise ValueError(f"field contact: geom type {gtype} is not a sphere, capsule, cylinder or box")
 
 
+def geom_judged_points(gtype: int, size: np.ndarray, cfg: FieldContactCfg) -> tuple[np.ndarray, float]:
+    """(points (P, 3) in the geom's frame, offset): what the judgement reads of a geom, at d − offset. With
+    ``cfg.cores`` a capsule is its axis (z, neighbours <= ``axis_spacing``) inflated by its radius and a sphere its
+    centre; otherwise, and for boxes and cylinders, the surface samples (:func:`geom_surface_points`) at offset 0."""
+    g = mujoco.mjtGeom
+    if cfg.cores and gtype == g.mjGEOM_SPHERE:
+        return np.zeros((1, 3)), float(size[0])
+    if cfg.cores and gtype == g.mjGEOM_CAPSULE:
+        h = float(size[1])
+        z = np.linspace(-h, h, max(2, math.ceil(2 * h / cfg.axis_spacing) + 1))
+        return np.c_[np.zeros_like(z), np.zeros_like(z), z], float(size[0])
+    return geom_surface_points(gtype, size, cfg.spacing), 0.0
+
+
 def _quat_rotate(q: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
     """Rotate ``v`` (..., 3) by unit quaternions ``q`` (..., 4) (w, x, y, z)."""
     w, xyz = q[..., :1], q[..., 1:]
@@ -172,9 +195,10 @@ def _quat_np(q: np.ndarray, v: np.ndarray) -> np.ndarray:
 class FieldContact:
     """Contact of each robot body with the obstacles of each env's scene, judged from the field bank's SDF.
 
-    ``bodies`` are the robot bodies with collision geoms; ``geom_points[g]`` the surface samples of collision geom
-    ``g`` in its body's frame (body ``geom_body[g]``). ``ghost_parts`` bodies are judged but do not count as hard
-    contacts; with ``ghost_obstacles`` no contact is hard (the physical mode's training aids, same meaning).
+    ``bodies`` are the robot bodies with collision geoms; ``geom_points[g]`` the points judged for collision geom
+    ``g`` in its body's frame (body ``geom_body[g]``) at d − ``geom_offset[g]`` (:func:`geom_judged_points`).
+    ``ghost_parts`` bodies are judged but do not count as hard contacts; with ``ghost_obstacles`` no contact is
+    hard (the physical mode's training aids, same meaning).
     """
 
     def __init__(
@@ -186,8 +210,10 @@ class FieldContact:
         ghost_parts: Sequence[str] = (),
         ghost_obstacles: bool = False,
     ):
-        if cfg.spacing <= 0:
-            raise ValueError(f"sim.field_contact.spacing={cfg.spacing}: must be > 0")
+        if cfg.spacing <= 0 or cfg.axis_spacing <= 0:
+            raise ValueError(
+                f"sim.field_contact.spacing={cfg.spacing}, axis_spacing={cfg.axis_spacing}: both must be > 0"
+            )
         if cfg.sdf not in CONTACT_SDFS:
             raise ValueError(f"sim.field_contact.sdf={cfg.sdf!r}; valid: {', '.join(CONTACT_SDFS)}")
         self.cfg, self.device = cfg, torch.device(device)
@@ -195,15 +221,17 @@ class FieldContact:
         body_ids = list(dict.fromkeys(int(model.geom_bodyid[g]) for g in geoms))
         self.bodies = [model.body(b).name for b in body_ids]
         f32 = dict(dtype=torch.float32, device=self.device)
-        pts, centres, radii = [], [], []
+        pts, offsets, centres, radii = [], [], [], []
         for g in geoms:
-            local = geom_surface_points(int(model.geom_type[g]), model.geom_size[g], cfg.spacing)
+            local, off = geom_judged_points(int(model.geom_type[g]), model.geom_size[g], cfg)
             p = model.geom_pos[g] + _quat_np(np.broadcast_to(model.geom_quat[g], (len(local), 4)), local)
             c = 0.5 * (p.min(0) + p.max(0))
             pts.append(torch.tensor(p, **f32))
+            offsets.append(off)
             centres.append(c)
-            radii.append(float(np.linalg.norm(p - c, axis=1).max()))
+            radii.append(float(np.linalg.norm(p - c, axis=1).max()) + off)  # the judged shape's bounding sphere
         self.geom_points = pts  # per geom (K_g, 3), body frame
+        self.geom_offset = torch.tensor(offsets, **f32)  # (G,) inflation of each geom's points
         self.geom_body = torch.tensor([body_ids.index(int(model.geom_bodyid[g])) for g in geoms], device=self.device)
         self.geom_centre = torch.tensor(np.array(centres), **f32)  # (G, 3) bounding-sphere centres, body frame
         self.geom_radius = torch.tensor(radii, **f32)  # (G,)
@@ -257,8 +285,8 @@ class FieldContact:
         """The sample points packed for the fused kernel on ``device`` (cull distance: radius + margin + slack)."""
         if device not in self._packed:
             cull = (self.geom_radius + self.cfg.margin + CULL_SLACK).tolist()
-            groups, bodies = self.geom_points, self.geom_body.tolist()
-            self._packed[device] = BodyPoints.from_groups(groups, bodies, self.geom_centre, cull, device)[0]
+            groups, bodies, off = self.geom_points, self.geom_body.tolist(), self.geom_offset.tolist()
+            self._packed[device] = BodyPoints.from_groups(groups, bodies, self.geom_centre, cull, device, off)[0]
         return self._packed[device]
 
     def body_sdf(self, bank, field_idx: torch.Tensor, pos: torch.Tensor, quat: torch.Tensor) -> torch.Tensor:
@@ -294,28 +322,17 @@ class FieldContact:
             b = int(gb[g])
             points.append((pos[e, b, None] + local @ rot[e, b].transpose(-1, -2)).reshape(-1, 3))
             fields.append(idx[e].repeat_interleave(len(local)))
-            parts.append((b, e, len(local)))
+            parts.append((b, e, len(local), float(self.geom_offset[g])))
         if not parts:
             return out
         s = bank.query(torch.cat(fields), torch.cat(points)[:, None])
         sdf = torch.where(s.inside, s.sdf, torch.full_like(s.sdf, math.inf)).to(self.device)[:, 0]
         start = 0
-        for b, e, k in parts:
-            m = sdf[start : start + len(e) * k].view(len(e), k).amin(dim=1)
+        for b, e, k, off in parts:
+            m = sdf[start : start + len(e) * k].view(len(e), k).amin(dim=1) - off
             out[e, b] = torch.minimum(out[e, b], m)
             start += len(e) * k
         return out
-
-    def world_points(self, pos: torch.Tensor, quat: torch.Tensor) -> torch.Tensor:
-        """(n, P, 3) every sample point in the world frame (all geoms in order; diagnostics and tests)."""
-        rot = quat_to_matrix(quat)
-        return torch.cat(
-            [
-                pos[:, int(b), None] + p @ rot[:, int(b)].transpose(-1, -2)
-                for p, b in zip(self.geom_points, self.geom_body, strict=True)
-            ],
-            dim=1,
-        )
 
     @staticmethod
     def _outside_gap(bank, idx: torch.Tensor, p: torch.Tensor) -> torch.Tensor:

@@ -423,8 +423,9 @@ class FieldBank:
         thread_per_body: bool | None = None,
         contact: bool = False,
     ) -> torch.Tensor:
-        """(N, B) smallest d over each body's points of ``bodies``, posed by ``pos`` (N, B, 3) and unit ``quat``
-        (N, B, 4; w, x, y, z), in fields ``field_idx`` (N,): one fused kernel (:mod:`cat.fields.body_points`).
+        """(N, B) smallest d (less its group's offset) over each body's points of ``bodies``, posed by ``pos``
+        (N, B, 3) and unit ``quat`` (N, B, 4; w, x, y, z), in fields ``field_idx`` (N,): one fused kernel
+        (:mod:`cat.fields.body_points`).
 
         +inf where every point of the body lies outside its grid box or in a culled group (``cull=False``: none
         is culled). Interpolation and out-of-grid rule are :meth:`query`'s. ``thread_per_body``: one kernel thread
@@ -462,6 +463,7 @@ class FieldBank:
             wp.from_torch(bodies.group_start, dtype=i32),
             wp.from_torch(bodies.centre, dtype=v3),
             wp.from_torch(bodies.cull, dtype=f32),
+            wp.from_torch(bodies.offset, dtype=f32),
             wp.from_torch(bodies.points, dtype=v3),
             int(cull),
             wp.from_torch(out.view(-1), dtype=f32),

@@ -2,9 +2,11 @@
 """Smallest scene SDF over point sets fixed on rigid bodies: one fused Warp kernel per query.
 
 A :class:`BodyPoints` holds, per body, groups of points in the body's frame (e.g. the surface samples of each
-collision geom), each group with a bounding sphere. :func:`min_sdf_kernel` rotates and translates each body's
-points by the body pose and returns the smallest trilinear d of the world's scene over them, reading the bank's d
-grid directly (no point buffer, no per-point query output). One thread per world on the CPU (a Warp CPU launch
+collision geom, or a capsule's axis), each group with a bounding sphere and an offset: the group stands for the
+points inflated by that radius (a capsule is its axis inflated by its radius), so its SDF is d − offset.
+:func:`min_sdf_kernel` rotates and translates each body's points by the body pose and returns the smallest
+trilinear d − offset of the world's scene over them, reading the bank's d grid directly (no point buffer, no
+per-point query output). One thread per world on the CPU (a Warp CPU launch
 runs its threads one after another: fewer, longer threads cost less), one per (world, body) on CUDA.
 
 Semantics are the bank query's (:mod:`cat.fields._bank_kernel`): the same trilinear interpolation of the voxel
@@ -40,7 +42,9 @@ class BodyPoints:
     centre: torch.Tensor
     """(G, 3) float32: bounding-sphere centre of each group, body frame."""
     cull: torch.Tensor
-    """(G,) float32: the group is skipped when d at its centre is >= this (radius + margin + slack)."""
+    """(G,) float32: the group is skipped when d at its centre is >= this (radius + offset + margin + slack)."""
+    offset: torch.Tensor
+    """(G,) float32: the group's points inflated by this radius (0: the points themselves)."""
 
     @property
     def num_bodies(self) -> int:
@@ -54,9 +58,12 @@ class BodyPoints:
         centre: torch.Tensor,
         cull: list[float],
         device: torch.device,
+        offset: list[float] | None = None,
     ) -> tuple["BodyPoints", list[int]]:
-        """Pack ``groups[g]`` (K_g, 3) of body ``group_body[g]``, bounding-sphere centre ``centre[g]`` and cull
-        distance ``cull[g]``. Returns the packing and the order of the groups in it (stable sort by body)."""
+        """Pack ``groups[g]`` (K_g, 3) of body ``group_body[g]``, bounding-sphere centre ``centre[g]``, cull
+        distance ``cull[g]`` and inflation ``offset[g]`` (default 0). Returns the packing and the order of the
+        groups in it (stable sort by body)."""
+        offset = [0.0] * len(groups) if offset is None else offset
         order = sorted(range(len(groups)), key=lambda g: group_body[g])
         nb = max(group_body) + 1 if groups else 0
         counts = torch.tensor([len(groups[g]) for g in order], dtype=torch.int64)
@@ -71,6 +78,7 @@ class BodyPoints:
                 body_start=torch.cat((zero, per_body.cumsum(0))).to(**i32),
                 centre=centre[order].to(**f32).contiguous(),
                 cull=torch.tensor([cull[g] for g in order], **f32),
+                offset=torch.tensor([offset[g] for g in order], **f32),
             ),
             order,
         )
@@ -125,13 +133,14 @@ def min_sdf_kernel(scalar: type, channels: int = 4) -> wp.Kernel:
         group_start: wp.array(dtype=wp.int32),
         centre: wp.array(dtype=wp.vec3),
         cull: wp.array(dtype=wp.float32),
+        offset: wp.array(dtype=wp.float32),
         points: wp.array(dtype=wp.vec3),
         use_cull: int,
         out: wp.array(dtype=wp.float32),
     ):
         """Thread t: world ``world_order[t]``, all its bodies (``split_bodies`` 0), or world
         ``world_order[t / num_bodies]``, body ``t % num_bodies`` (1); per body the min over its unculled groups
-        of the trilinear d at its points."""
+        of the trilinear d at its points less the group's offset."""
         t = wp.tid()
         wi = t
         b0 = int(0)
@@ -172,6 +181,7 @@ def min_sdf_kernel(scalar: type, channels: int = 4) -> wp.Kernel:
             for g in range(body_start[b], body_start[b + 1]):
                 k0 = group_start[g]
                 k1 = group_start[g + 1]
+                off = offset[g]
                 if use_cull != 0:  # d at the bounding-sphere centre (outside the grid: distance to the grid box)
                     u = (pos + rot * centre[g] - org) * inv
                     if not (wp.isfinite(u[0]) and wp.isfinite(u[1]) and wp.isfinite(u[2])):
@@ -195,7 +205,7 @@ def min_sdf_kernel(scalar: type, channels: int = 4) -> wp.Kernel:
                         and u[1] <= float(ny)
                         and u[2] <= float(nz)
                     ):  # also False for NaN: a non-finite point is clear
-                        best = wp.min(best, trilinear_d(sd, u, nx, ny, nz, o1, o2, o3))
+                        best = wp.min(best, trilinear_d(sd, u, nx, ny, nz, o1, o2, o3) - off)
             out[w * num_bodies + b] = best
 
     return min_sdf

@@ -8,6 +8,7 @@ import torch
 
 from cat.envs.config import EnvCfg
 from cat.envs.curriculum import CurriculumCfg, DifficultyCurriculum
+from cat.envs.episode_log import episode_log
 from cat.envs.scene_set import SceneSet
 from cat.envs.traversal_env import TraversalEnv
 from cat.eval.runner import run_scene_group
@@ -113,6 +114,25 @@ def test_env_draws_scenes_by_group_weight():
     cfg.curriculum.group_weights = {"side_pass": 1.0}
     with pytest.raises(ValueError, match=r"names \['side_pass'\], not a scene group of this set"):
         TraversalEnv(cfg, sim="mujoco", scenes=SceneSet.typical("crouch-pass", num_envs=2, variants=1), seed=1)
+
+
+def test_a_mixed_run_logs_success_per_scene_group():
+    """With several scene groups the episode log adds ``Metrics/success_rate/<group>`` (the run is watched on each
+    kind of scene); envs of the crouch-pass group that reached their goal count for that group only."""
+    scenes = SceneSet.typical(["hurdle-crouch", "crouch-pass"], num_envs=8, variants=1)
+    env = TraversalEnv(EnvCfg(num_envs=8, scene_kind="typical"), sim="mujoco", scenes=scenes, seed=1)
+    env.reset_idx(torch.arange(8))
+    groups = scenes.groups_of_envs()
+    crouch = groups == scenes.group_names.index("crouch-pass")
+    assert crouch.any() and (~crouch).any()
+    env.trial.reach_time[crouch] = 1.0  # reached, no contact, no fall: success
+    log = episode_log(env, torch.arange(8))
+    assert float(log["Metrics/success_rate/crouch-pass"]) == 1.0
+    assert float(log["Metrics/success_rate/hurdle-crouch"]) == 0.0
+    assert float(log["Metrics/success_rate"]) == pytest.approx(float(crouch.float().mean()))
+    one = TraversalEnv(EnvCfg(num_envs=2, scene_kind="crouch-pass"), sim="mujoco",
+                       scenes=SceneSet.typical("crouch-pass", num_envs=2, variants=1), seed=1)  # fmt: skip
+    assert not [k for k in episode_log(one, torch.arange(2)) if k.startswith("Metrics/success_rate/")]
 
 
 def test_warmup_difficulties_take_the_lowest_levels():

@@ -125,3 +125,17 @@ def test_bar_tasks_ride_the_swing_foot_target_on_the_bars(task):
     still to train (docs/multi_hurdle.md: with 0 the term is 8x weaker before the feet hit the bars)."""
     params = load_config([f"task={task}"]).task.rewards.params
     assert params.foot_clearance_lookahead == 0.3 and params.foot_clearance_min_only
+
+
+@pytest.mark.parametrize("row", ROWS)
+def test_each_rows_column_cell_builds_and_steps(tmp_path, row):
+    """The crouch-pass column's cells: each method's env builds on the column's task and steps (the run would start)."""
+    import torch
+
+    exp = load_experiment("table1")
+    cell = exp.cells[_row_cell(exp.tables["table1"], row)]
+    small = ["task.scene_variants=1", "task.warmup_variants=1", "num_envs=2", f"run_root={tmp_path}"]
+    cfg = load_config([f"task={cell.task}", f"method={cell.method}", *cell.overrides, *small])
+    env = make_env(cfg)
+    env.step(torch.zeros(env.num_envs, env.num_actions))
+    assert env.cfg.scene_kind == "crouch-pass" and env.curriculum is not None

@@ -4,6 +4,8 @@ Optional: ``record=rollout.rrd`` (rerun replay of world 0), ``seed=`` (start pos
 ``scene_dir=`` (other scenes than the run's), ``mirror=true`` (their left/right mirror images), ``sim=``,
 ``num_envs=``, ``by_scene=true`` (first one line per scene: ``scene=<i> kind=<k> difficulty=<d> episodes=...``),
 ``contacts=true`` (then a line naming the body that touched first: ``first_contact=<body>:<trials>,...``),
+``clearance=true`` (then the success rate if contacts shallower than 1 / 2 / 4 cm were ignored:
+``tolerant_success=1cm:<x>,2cm:<x>,4cm:<x> deepest_mm_median=<x> contact_trials=<n>``),
 ``warmup=true`` (the run's training-only warm-up scenes instead of the paper's: where its curriculum stands).
 Prints one line: ``episodes=<n> success_rate=<x> distance_error=<m> collision_rate=<x> fall_rate=<x>``.
 """
@@ -15,18 +17,20 @@ import sys
 from cat.cli import Script, dataclass_loader, run
 from cat.envs.scene_set import SceneSetError
 from cat.envs.trial_metrics import summarize
-from cat.eval.contacts import contact_line
+from cat.eval.contacts import clearance_line, contact_line
 from cat.learning.play import PlayCfg, play_trials, scene_lines
 from cat.learning.runs import CheckpointError
 
 
 def _job(cfg: PlayCfg) -> int:
-    trials, results, scenes, first = play_trials(cfg)
+    played = play_trials(cfg)
     if cfg.by_scene:
-        print("\n".join(scene_lines(trials, results, scenes)))
-    if first is not None:
-        print(contact_line(first))
-    print(summarize(results).line())
+        print("\n".join(scene_lines(played.trials, played.results, played.scenes)))
+    if played.first_contacts is not None:
+        print(contact_line(played.first_contacts))
+    if played.clearance is not None:
+        print(clearance_line(played.results, played.clearance))
+    print(summarize(played.results).line())
     return 0
 
 

@@ -315,9 +315,11 @@ def test_evaluation_of_a_field_trained_run_is_physical(field_run, caplog, monkey
         return built[-1]
 
     monkeypatch.setattr(play_mod, "make_eval_env", recording)
-    play = PlayCfg(checkpoint=str(run), episodes=2, scene_dir=str(slab), contacts=True, time_s=0.2)
+    play = PlayCfg(checkpoint=str(run), episodes=2, scene_dir=str(slab), contacts=True, clearance=True, time_s=0.2)
     with caplog.at_level(logging.INFO, logger="cat.eval.runner"):
-        _, results, _, first = play_trials(play)
+        played = play_trials(play)
+    results, first = played.results, played.first_contacts
+    assert all(c < 0.0 for c in played.clearance)  # the shins start inside the slab
     assert [e.obstacles for e in built] == ["physical"]
     assert len(obstacle_geom_ids(built[0].sim.model)) > 0  # the slab is geometry in the evaluation world
     assert all(r.collided for r in results) and all(b is not None for b in first)

@@ -171,7 +171,7 @@ def test_manifest_rejects_a_row_mixing_observation_layouts(method_runs, tmp_path
 
 def test_play_by_scene_lines_add_up_to_the_summary(method_runs):
     """play.py by_scene=true: one line per scene, each the summary of that scene's own trials."""
-    trials, results, scenes, _ = play_trials(PlayCfg(checkpoint=str(method_runs["ours"]), episodes=3, time_s=0.5))
+    trials, results, scenes, *_ = play_trials(PlayCfg(checkpoint=str(method_runs["ours"]), episodes=3, time_s=0.5))
     assert len(scenes) == 1 and scenes[0].kind == "hurdle-crouch"  # the run's one variant; a second one by hand:
     other = make_typical("crouch-pass", 0.75, seed=3)
     trials = trials + [replace(trials[0], scene=1)]

@@ -1,17 +1,31 @@
-"""Which robot body touches an obstacle first in each trial: the collision metric broken down by body.
+"""The collision metric broken down: which robot body touches an obstacle first, and how deep contacts go.
 
 A hurdle policy that lands its feet on the bar and a crouch policy that hits the lintel with its head have the same
 collision rate; the first-contact body tells them apart (``scripts/play.py contacts=true``). Read from the
 per-body obstacle contact sensors the env model carries (``cat.envs.scene.part_obstacle_sensor``).
+
+The paper counts a trial with any collision as failed but does not say how a collision is detected; the authors'
+release trains with an episode ending only when a body point is 4 cm inside an obstacle. ``Clearance`` measures,
+per trial, the deepest penetration of the robot's collision shapes (the field-contact judgement's exact capsule
+distances on the contact SDF, ``cat.envs.field_contact``), so the success rate can be read at a depth tolerance
+too (``scripts/play.py clearance=true``): how much of the failure is grazing contact.
 """
 
 from __future__ import annotations
 
+import math
 from collections import Counter
 
+import mujoco
+import numpy as np
 import torch
 
+from cat.envs.field_contact import FieldContact, FieldContactCfg, fill_contact_sdf
 from cat.envs.scene import PART_SENSOR_PREFIX
+from cat.envs.trial_metrics import TrialResult
+
+TOLERANCES = (0.01, 0.02, 0.04)
+"""m: the depth tolerances ``clearance_line`` reads the success rate at (0.04: the release's training rule)."""
 
 
 class FirstContacts:
@@ -51,3 +65,67 @@ def contact_line(first: list[str | None]) -> str:
     hits = [b for b in first if b is not None]
     counts = ",".join(f"{b}:{k}" for b, k in Counter(hits).most_common())
     return f"first_contact={counts or 'none'} trials_with_contact={len(hits)}/{len(first)}"
+
+
+class Clearance:
+    """``on_step`` hook for ``cat.eval.runner.run_trials``: per trial, the smallest signed distance between the
+    robot's collision shapes and the obstacles over the trial's control steps until a fall (negative: the deepest
+    penetration), judged as ``sim.obstacles=field`` judges contact (capsule axes and sphere centres at SDF − radius on
+    each scene's contact SDF; body poses by MuJoCo's forward kinematics of each world's state)."""
+
+    def __init__(self, env):
+        if env.scenes is None:
+            raise ValueError("clearance=true needs obstacle scenes; this run plays on flat ground")
+        model = env.sim.model
+        self.fc = FieldContact(model, env.robot, FieldContactCfg())
+        fill_contact_sdf(env.scenes, self.fc.cfg)
+        self._model, self._data = model, mujoco.MjData(model)
+        self._ids = [model.body(b).id for b in self.fc.bodies]
+        self._batches: list[torch.Tensor] = []
+
+    def _poses(self, qpos: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
+        d, ids = self._data, self._ids
+        pos, quat = np.zeros((len(qpos), len(ids), 3)), np.zeros((len(qpos), len(ids), 4))
+        for i, q in enumerate(qpos):
+            d.qpos[:] = q
+            mujoco.mj_kinematics(self._model, d)
+            pos[i], quat[i] = d.xpos[ids], d.xquat[ids]
+        return torch.tensor(pos, dtype=torch.float32), torch.tensor(quat, dtype=torch.float32)
+
+    def on_step(self, env) -> None:
+        if int(env.step_count[0]) == 0:  # run_trials placed a new batch (world 0 is in every batch)
+            self._batches.append(torch.full((env.num_envs,), math.inf))
+        tr = env.trial
+        active = ((env.step_count <= tr.window) & ~tr.fell).cpu()
+        if not active.any():
+            return
+        ids = active.nonzero().flatten()
+        pos, quat = self._poses(env.sim.qpos[ids].cpu().numpy())
+        idx = env.field_source.field_idx[ids.to(env.field_source.field_idx.device)]
+        sdf = self.fc.body_sdf(env.scenes.bank, idx, pos, quat).amin(-1).cpu()
+        slot = self._batches[-1]
+        slot[ids] = torch.minimum(slot[ids], sdf)
+
+    def clearances(self, num_trials: int) -> list[float]:
+        """Each trial's smallest signed distance [m] (``inf``: never near an obstacle), in trial order."""
+        flat = torch.cat(self._batches).tolist() if self._batches else []
+        if len(flat) < num_trials:
+            raise ValueError(f"recorded {len(flat)} trial slots, fewer than the {num_trials} trials asked for")
+        return flat[:num_trials]
+
+
+def tolerant_success(results: list[TrialResult], clearance: list[float], tolerance: float) -> float:
+    """Success rate when contacts shallower than ``tolerance`` [m] are ignored: reached within the window, no fall,
+    no penetration deeper than ``tolerance``."""
+    ok = [
+        math.isfinite(r.reach_time) and not r.fell and c > -tolerance for r, c in zip(results, clearance, strict=True)
+    ]
+    return sum(ok) / max(len(ok), 1)
+
+
+def clearance_line(results: list[TrialResult], clearance: list[float]) -> str:
+    """``tolerant_success=1cm:<x>,2cm:<x>,4cm:<x> deepest_mm_median=<x> (trials with contact)``."""
+    rates = ",".join(f"{round(t * 100)}cm:{tolerant_success(results, clearance, t):.3f}" for t in TOLERANCES)
+    deep = [-1000.0 * c for r, c in zip(results, clearance, strict=True) if r.collided and math.isfinite(c)]
+    median = f"{float(np.median(deep)):.1f}" if deep else "nan"
+    return f"tolerant_success={rates} deepest_mm_median={median} contact_trials={len(deep)}"

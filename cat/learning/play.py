@@ -11,11 +11,12 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import NamedTuple
 
 from tqdm import tqdm
 
 from cat.envs.trial_metrics import Summary, TrialResult, summarize
-from cat.eval.contacts import FirstContacts
+from cat.eval.contacts import Clearance, FirstContacts
 from cat.eval.runner import EvalCfg, make_eval_env, run_scene_group, run_trials
 from cat.eval.trials import Trial, first_trials, flat_trials, scene_trials
 from cat.learning.runs import load_run_config, resolve_checkpoint
@@ -41,11 +42,23 @@ class PlayCfg:
     by_scene: bool = False  # scripts/play.py also prints one line per evaluated scene (where a policy fails)
     warmup: bool = False  # the run's training-only warm-up scenes (d < 0) instead: curriculum progress, diagnostic
     contacts: bool = False  # scripts/play.py also prints which body touched first (cat.eval.contacts)
+    clearance: bool = False  # ... and the success rate at contact-depth tolerances (cat.eval.contacts.Clearance)
+
+
+class Played(NamedTuple):
+    """What ``play_trials`` returns: the trials, their results in order, the evaluated scenes (``None`` on flat
+    ground), and with the options each trial's first-contact bodies and its clearance [m] (else ``None``)."""
+
+    trials: list[Trial]
+    results: list[TrialResult]
+    scenes: list[Scene] | None
+    first_contacts: list[str | None] | None = None
+    clearance: list[float] | None = None
 
 
 def play(cfg: PlayCfg) -> Summary:
     """``cfg.checkpoint`` may be a run folder: its latest checkpoint plays."""
-    return summarize(play_trials(cfg)[1])
+    return summarize(play_trials(cfg).results)
 
 
 def scene_lines(trials: list[Trial], results: list[TrialResult], scenes: list[Scene] | None) -> list[str]:
@@ -58,18 +71,16 @@ def scene_lines(trials: list[Trial], results: list[TrialResult], scenes: list[Sc
     return lines
 
 
-def play_trials(
-    cfg: PlayCfg,
-) -> tuple[list[Trial], list[TrialResult], list[Scene] | None, list[str | None] | None]:
-    """The trials of ``play``, their results in order, the evaluated scenes (``None`` on flat ground) and, with
-    ``cfg.contacts``, each trial's first-contact bodies (``cat.eval.contacts``; else ``None``)."""
+def play_trials(cfg: PlayCfg) -> Played:
+    """The trials of ``play`` and what they gave (``Played``; ``cfg.contacts`` / ``cfg.clearance``:
+    ``cat.eval.contacts``)."""
     cfg = replace(cfg, checkpoint=str(resolve_checkpoint(cfg.checkpoint)))
     run_cfg = load_run_config(cfg.checkpoint)
     task = run_cfg.task
     if cfg.episodes < 1:
         raise ValueError(f"episodes must be >= 1, got {cfg.episodes}")
     group = run_scene_group(task, cfg.scene_seed, cfg.scene_dir, cfg.scene_kind, cfg.warmup)
-    for option in ("mirror", "contacts"):
+    for option in ("mirror", "contacts", "clearance"):
         if getattr(cfg, option) and group is None:
             raise ValueError(f"{option}=true needs obstacle scenes; this run trained on flat ground")
     if cfg.mirror:
@@ -95,6 +106,9 @@ def play_trials(
     if cfg.contacts:
         contacts = FirstContacts(env)
         hooks.append(contacts.on_step)
+    if cfg.clearance:
+        clearance = Clearance(env)
+        hooks.append(clearance.on_step)
     if cfg.record:
         from cat.viz.record import RolloutRecorder
 
@@ -116,4 +130,5 @@ def play_trials(
     if cfg.record:
         recorder.close()
     first = contacts.first_bodies(len(trials)) if cfg.contacts else None
-    return trials, results, (list(group.scenes) if group is not None else None), first
+    depth = clearance.clearances(len(trials)) if cfg.clearance else None
+    return Played(trials, results, list(group.scenes) if group is not None else None, first, depth)

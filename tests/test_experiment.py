@@ -283,3 +283,36 @@ def test_a_key_added_at_its_old_behaviour_keeps_the_run_hashes(tmp_path):
         plan = Plan(load_experiment(_write(tmp_path, cells)), str(tmp_path / "exps"))
         hashes.append((plan.units["prior@0"].hash, plan.units["same@0"].hash))
     assert hashes[0][0] == hashes[0][1] == hashes[1][0] != hashes[1][1]
+
+
+def test_field_contact_defaults_never_restart_a_physical_run(tmp_path):
+    """A physical run's hash leaves sim.field_contact out; a state recorded in an earlier form of it (before keys were
+    added) is re-keyed, for the run and for what reads it; a field run is re-keyed only if its judgement is the one
+    that form stood for."""
+    from cat.experiment.plan import FIELD_CONTACT_HASHED, Plan, _comparable
+    from cat.experiment.spec import load_experiment
+    from cat.learning.hydra_cfg import load_config
+
+    assert "field_contact" not in _comparable(load_config([]))["sim"]
+    assert "field_contact" in _comparable(load_config(["sim.obstacles=field"]))["sim"]
+    old_field = ["sim.obstacles=field", "sim.field_contact.margin=0.005", "sim.field_contact.substeps=false",
+                 "sim.field_contact.sdf=field", "sim.field_contact.cores=false"]  # fmt: skip
+    cells = {
+        "prior": {"task": "flat", "iterations": 2},
+        "next": {"task": "flat", "iterations": 2, "init": "prior"},
+        "old_field": {"task": "flat", "iterations": 2, "overrides": old_field},
+        "new_field": {"task": "flat", "iterations": 2, "overrides": ["sim.obstacles=field"]},
+    }
+    plan = Plan(load_experiment(_write(tmp_path, cells)), str(tmp_path / "exps"))
+    form = 0  # FIELD_CONTACT_HASHED[0]: {spacing, margin 0.005}
+    assert FIELD_CONTACT_HASHED[form][0]["margin"] == 0.005
+    earlier = {k: plan.unit_hash(u, form) for k, u in plan.units.items()}
+    assert earlier["new_field@0"] is None  # its judgement is not that form's
+    assert earlier["prior@0"] != plan.units["prior@0"].hash and earlier["next@0"] != plan.units["next@0"].hash
+    for key, u in plan.units.items():
+        u.run_dir.mkdir(parents=True)
+        (u.run_dir / "model_1.pt").write_bytes(b"")  # the final checkpoint
+        plan.state["units"][key] = {"hash": earlier[key] or "0123456789abcdef", "run_dir": str(u.run_dir)}
+    status = {k: plan.status(u) for k, u in plan.units.items()}
+    assert status == {"prior@0": "done", "next@0": "done", "old_field@0": "done", "new_field@0": "stale"}
+    assert plan.state["units"]["prior@0"]["hash"] == plan.units["prior@0"].hash  # re-keyed

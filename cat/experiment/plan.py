@@ -6,10 +6,15 @@ upstream unit's hash and budget, or a checkpoint file's bytes); budgets and per-
 larger budget continues a run instead of restarting it. A unit is ``done`` when the state records its hash and
 its final checkpoint exists, ``resume`` when its run stands at an earlier checkpoint with the same hash, ``run``
 otherwise (a stale folder of another hash is moved aside, never deleted).
+
+A physical run's hash leaves ``sim.field_contact`` out (it judges nothing there). Hashes recorded before that, or
+before keys were added to ``sim.field_contact`` (``FIELD_CONTACT_HASHED``), are recognised and re-keyed, so a
+change of the field-contact defaults never restarts a run it does not touch.
 """
 
 from __future__ import annotations
 
+import copy
 import hashlib
 import json
 import math
@@ -29,9 +34,17 @@ NEUTRAL_DEFAULTS = {
     ("sim", "field_storage"): "float32",
     ("task", "episodes", "goal_stand_radius"): 0.0,
     ("algo", "max_noise_std"): 0.0,
+    ("task", "curriculum", "group_weights"): {},
 }
 """Keys added after runs were hashed, with the value that reproduces what those runs did: left out of the hash at
 that value, so adding the key does not make every unfinished run "changed" (a key added at its old behaviour)."""
+FIELD_CONTACT_HASHED = (
+    ({"spacing": 0.03, "margin": 0.005}, {"substeps": False, "sdf": "field", "cores": False}),
+    ({"spacing": 0.03, "margin": 0.004, "substeps": True, "sdf": "mesh", "band": 0.1}, {"cores": False}),
+)
+"""Earlier forms of ``sim.field_contact`` in run hashes (until 2026-12-04, and until 2026-12-05), each with the values
+of the keys added since that reproduce its judgement: a recorded hash of one of these forms is the same run
+(physical runs: whatever it held; field runs: when their judgement is that one)."""
 STATE_FILE = "state.json"
 
 
@@ -46,10 +59,13 @@ def latest_checkpoint(run_dir: Path) -> tuple[int, Path] | None:
 
 
 def _comparable(cfg) -> dict:
-    """A TrainCfg as a dict without the keys that do not change what a run learns."""
+    """A TrainCfg as a dict without the keys that do not change what a run learns (``sim.field_contact`` of a
+    physical run among them)."""
     out = OmegaConf.to_container(OmegaConf.structured(cfg))
     for key in VOLATILE:
         out.pop(key, None)
+    if out.get("sim", {}).get("obstacles") == "physical":
+        out["sim"].pop("field_contact", None)
     for path, neutral in NEUTRAL_DEFAULTS.items():
         parent = out
         for part in path[:-1]:
@@ -57,6 +73,22 @@ def _comparable(cfg) -> dict:
         if isinstance(parent, dict) and parent.get(path[-1], neutral) == neutral:
             parent.pop(path[-1], None)
     return out
+
+
+def _earlier_form(config: dict, form: int) -> dict | None:
+    """``config`` (a ``_comparable`` dict) as ``FIELD_CONTACT_HASHED[form]`` hashed it; None: a field run whose
+    judgement is not that form's."""
+    hashed, behaviour = FIELD_CONTACT_HASHED[form]
+    out = copy.deepcopy(config)
+    fc = out["sim"].get("field_contact")
+    if fc is not None and any(fc.get(k) != v for k, v in {**hashed, **behaviour}.items()):
+        return None
+    out["sim"]["field_contact"] = dict(hashed)
+    return out
+
+
+def _digest(ident: dict) -> str:
+    return hashlib.sha256(json.dumps(ident, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
 def file_digest(path: str | Path) -> str:
@@ -78,6 +110,7 @@ class Unit:
     iterations: int  # the first leg's budget (a count)
     hash: str = ""
     inputs: dict[str, str] = field(default_factory=dict)  # "init" / "teachers" -> upstream unit key or path
+    config: dict = field(default_factory=dict)  # the hashed config (``_comparable``)
 
     @property
     def key(self) -> str:
@@ -127,14 +160,23 @@ class Plan:
             per_iter = (cfg.num_envs or cfg.task.num_envs) * cfg.algo.num_steps_per_env
             iterations = math.ceil(cell.env_steps / per_iter)
         unit = Unit(cell, seed, self.folder / "runs" / cell.name / f"seed{seed}", base, iterations)
-        ident = {"config": _comparable(cfg), "legs": [[leg.iterations, leg.overrides] for leg in cell.legs]}
+        unit.config = _comparable(cfg)
         if cell.init:
             unit.inputs["init"] = self._ref(cell.init, seed)
         for k, teacher in enumerate(cell.teachers):
             unit.inputs[f"teacher{k}"] = self._ref(teacher, seed)
-        ident["inputs"] = {k: self.identity(v) for k, v in unit.inputs.items()}
-        unit.hash = hashlib.sha256(json.dumps(ident, sort_keys=True, default=str).encode()).hexdigest()[:16]
+        unit.hash = self.unit_hash(unit)
         return unit
+
+    def unit_hash(self, unit: Unit, form: int | None = None) -> str | None:
+        """The unit's hash, or (``form``) the one ``FIELD_CONTACT_HASHED[form]`` gave it (None: not of that form)."""
+        config = unit.config if form is None else _earlier_form(unit.config, form)
+        inputs = {k: self.identity(v, form) for k, v in unit.inputs.items()}
+        if config is None or None in inputs.values():
+            return None
+        return _digest(
+            {"config": config, "legs": [[g.iterations, g.overrides] for g in unit.cell.legs], "inputs": inputs}
+        )
 
     def _ref(self, ref: str, seed: int) -> str:
         """A cell reference -> the upstream unit key (same seed if that cell has it, else its first), with
@@ -150,11 +192,21 @@ class Plan:
         key, _, file = ref.partition("/")
         return (self.units[key], file or None) if key in self.units else None
 
-    def identity(self, ref: str) -> str:
+    def identity(self, ref: str, form: int | None = None) -> str | None:
+        """What a unit's hash reads of ``ref`` (an upstream unit's hash in ``form`` too, None if it has none)."""
         if (found := self.unit_of(ref)) is not None:
             u, file = found
-            return f"{u.hash}:{file or u.final}:{u.cell.minutes}"
+            h = u.hash if form is None else self.unit_hash(u, form)
+            return None if h is None else f"{h}:{file or u.final}:{u.cell.minutes}"
         return f"{ref}:{file_digest(ref)}" if Path(ref).is_file() else ref
+
+    def rekey(self, recorded: str | None, current: str, earlier) -> bool:
+        """True when ``recorded`` is one of the ``earlier(form)`` hashes of what now hashes to ``current``."""
+        return (
+            recorded is not None
+            and recorded != current
+            and recorded in {earlier(f) for f in range(len(FIELD_CONTACT_HASHED))}
+        )
 
     def path_of(self, ref: str) -> str:
         """A unit key (``/model_<it>.pt``) or a checkpoint path -> the checkpoint file to read."""
@@ -218,6 +270,8 @@ class Plan:
         if recorded is None and self.adoptable(unit):
             self.state["units"][unit.key] = {"hash": unit.hash, "run_dir": str(unit.run_dir), "adopted": True}
             recorded = unit.hash
+        if self.rekey(recorded, unit.hash, lambda f: self.unit_hash(unit, f)):  # the hash's form changed, not the run
+            self.state["units"][unit.key]["hash"] = recorded = unit.hash
         if recorded != unit.hash:
             return "stale"
         it, _ = latest
@@ -297,18 +351,23 @@ class Plan:
     def table_dir(self, table: Table) -> Path:
         return self.folder / "tables" / table.name
 
-    def table_hash(self, table: Table) -> str:
-        ident = {
+    def table_hash(self, table: Table, form: int | None = None) -> str | None:
+        inputs = [self.identity(r, form) for r in self.table_refs(table) if r != "hold"]
+        if None in inputs:
+            return None
+        return _digest({
             "manifest": self.manifest(table),
             "opts": [table.trials_per_scene, table.seed, table.max_envs, table.sim]
             + ([table.perception, table.perception_setting] if table.perception != "ground_truth" else []),
-            "inputs": [self.identity(r) for r in self.table_refs(table) if r != "hold"],
-        }
-        return hashlib.sha256(json.dumps(ident, sort_keys=True, default=str).encode()).hexdigest()[:16]
+            "inputs": inputs,
+        })  # fmt: skip
 
     def table_done(self, table: Table) -> bool:
         recorded = self.state["tables"].get(table.name, {}).get("hash")
-        return recorded == self.table_hash(table) and (self.table_dir(table) / "trials.csv").is_file()
+        current = self.table_hash(table)
+        if self.rekey(recorded, current, lambda f: self.table_hash(table, f)):
+            self.state["tables"][table.name]["hash"] = recorded = current
+        return recorded == current and (self.table_dir(table) / "trials.csv").is_file()
 
     def table_overrides(self, table: Table) -> list[str]:
         out = self.table_dir(table)

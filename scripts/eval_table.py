@@ -2,7 +2,8 @@
 
 Other keys: ``sim=mujoco|warp``, ``device=``, ``seed=`` (start poses), ``max_envs=``, ``perception=ground_truth|lidar``
 (lidar: every trial through the simulated LiDAR -> map -> observation pipeline of the click demo, one robot at a
-time) with ``perception_setting=default|harsh|<yaml>`` (``configs/eval/perception/``). Writes ``<dir>/trials.csv``,
+time) with ``perception_setting=default|harsh|<yaml>`` (``configs/eval/perception/``), ``clearance=true`` (also
+``clearance.md``: each column's SR if contacts shallower than 1 / 2 / 4 cm were ignored). Writes ``<dir>/trials.csv``,
 ``table1.md/.tex``, ``table2.md/.tex`` (the tables the manifest asks for) and prints the Markdown. The manifest
 format is in ``cat/eval/manifest.py`` and docs/evaluation.md.
 """

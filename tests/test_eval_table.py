@@ -416,3 +416,19 @@ def test_by_scene_breakdown_counts_each_scenes_trials():
     md = render_by_scene(rows, "table2", ["A", "B"], ["easy", "hard"])
     lines = [line for line in md.splitlines() if line.startswith("| Easy") or line.startswith("| Hard")]
     assert lines == ["| Easy | s1 | 4 | 50 (50 / 25) | 50 (0 / 50) |", "| Hard | s2 | 1 | 0 (100 / 0) | – |"]
+
+
+def test_clearance_adds_the_contact_depth_report(tmp_path, checkpoints, scene_dirs):
+    """clearance=true: the same trials (trials.csv unchanged), plus clearance.md with one line per (row, column)
+    whose physical SR agrees with trials.csv; refused with perception in the loop."""
+    man = _manifest(tmp_path / "m.yaml", methods={"Hold": ["hold"]}, table2={k: str(v) for k, v in scene_dirs.items()})
+    base = EvalTableCfg(manifest=str(man), out=str(tmp_path / "o"), trials_per_scene=2, time_s=0.5)
+    rows, files = evaluate(base)
+    rows_c, files_c = evaluate(EvalTableCfg(**{**base.__dict__, "clearance": True}))
+    assert rows_c == rows and "clearance.md" not in files
+    lines = [x for x in files_c["clearance.md"].splitlines() if x.startswith("- ")]
+    assert [x.split(":")[0] for x in lines] == ["- Hold / table2 / easy", "- Hold / table2 / hard"]
+    for line in lines:
+        assert line.split(": ", 1)[1].startswith("success=0.000 tolerant_success=1cm:")
+    with pytest.raises(ManifestError, match="clearance=true .* needs perception=ground_truth"):
+        evaluate(EvalTableCfg(**{**base.__dict__, "clearance": True, "perception": "lidar"}), live=object())

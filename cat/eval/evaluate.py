@@ -23,6 +23,7 @@ from tqdm import tqdm
 from cat.checkpoint_io import CheckpointError, UnsafeCheckpointError
 from cat.envs.config import SuccessCfg
 from cat.envs.trial_metrics import TrialResult
+from cat.eval.contacts import Clearance, clearance_line
 from cat.eval.manifest import Manifest, ManifestError, MethodRun, load_manifest
 from cat.eval.runner import EvalCfg, HoldPolicy, SceneGroup, make_eval_env, run_trials
 from cat.eval.table import CSV_COLUMNS, render_by_scene, render_latex, render_markdown
@@ -49,6 +50,7 @@ class EvalTableCfg:
     perception: str = "ground_truth"  # ground_truth (the env's terms) | lidar (LiDAR -> map -> block, per trial)
     perception_setting: str = "default"  # with lidar: configs/eval/perception/<name>.yaml (default | harsh) or a path
     live_workers: int = 1  # with lidar: processes running a column's scenes in parallel (one trial each at a time)
+    clearance: bool = False  # also each trial's deepest penetration and the SR at depth tolerances (clearance.md/.csv)
 
 
 def scene_groups(manifest: Manifest) -> dict[str, list[SceneGroup]]:
@@ -115,6 +117,8 @@ def evaluate(cfg: EvalTableCfg, live=None) -> tuple[list[dict[str, str]], dict[s
         raise ManifestError(f"perception must be ground_truth or lidar, got {cfg.perception!r}")
     if cfg.perception == "lidar" and live is None:
         raise ManifestError("perception=lidar needs the live perception hook (scripts/eval_table.py hands it in)")
+    if cfg.clearance and cfg.perception != "ground_truth":
+        raise ManifestError("clearance=true measures the simulated trials: it needs perception=ground_truth")
     live = live if cfg.perception == "lidar" else None
     manifest = load_manifest(cfg.manifest)
     opts = EvalCfg(
@@ -134,6 +138,7 @@ def evaluate(cfg: EvalTableCfg, live=None) -> tuple[list[dict[str, str]], dict[s
     runs = [run for rs in manifest.methods.values() for run in rs]
     total = sum(len(ts) for run in runs for (table, group), ts in trials.items() if run.plays(table, group))
     rows: list[dict[str, str]] = []
+    depth: list[tuple[str, str, str, list[TrialResult], list[float]]] = []  # (method, table, column, results, m)
     with tqdm(total=total, desc="trials", unit="trial") as bar:
         for run in runs:
             for table, gl in groups.items():
@@ -154,8 +159,12 @@ def evaluate(cfg: EvalTableCfg, live=None) -> tuple[list[dict[str, str]], dict[s
                     else:
                         policy = load_policy(run.checkpoint, env, run.config)
                     bar.set_postfix_str(f"{run.method}/{run.seed} {table} {group.name}")
-                    results = run_trials(env, policy, ts, seed=opts.seed, progress=bar)
+                    hook = Clearance(env) if cfg.clearance else None
+                    on_step = hook.on_step if hook is not None else None
+                    results = run_trials(env, policy, ts, seed=opts.seed, progress=bar, on_step=on_step)
                     rows += [trial_row(run, table, group, t, r) for t, r in zip(ts, results, strict=True)]
+                    if hook is not None:
+                        depth.append((run.method, table, group.name, results, hook.clearances(len(ts))))
                     del env
     methods = list(manifest.methods)
     files = {"trials.csv": to_csv(rows)}
@@ -181,7 +190,22 @@ def evaluate(cfg: EvalTableCfg, live=None) -> tuple[list[dict[str, str]], dict[s
         files[f"{table}.md"] = render_markdown(rows, table, shown, names, text)
         files[f"{table}.tex"] = render_latex(rows, table, shown, names, text)
         files[f"{table}_by_scene.md"] = render_by_scene(rows, table, shown, names)
+    if depth:
+        files["clearance.md"] = clearance_report(depth)
     return rows, files
+
+
+def clearance_report(depth: list[tuple[str, str, str, list[TrialResult], list[float]]]) -> str:
+    """One line per (method, table, column), pooled over its trials: the physical SR and ``clearance_line``."""
+    head = (
+        "**Contact depth** (`clearance=true`, cat.eval.contacts): SR pooled over trials by the physical rule, and if "
+        "contacts shallower than 1 / 2 / 4 cm were ignored; deepest penetration of the trials with contact."
+    )
+    lines = [head, ""]
+    for method, table, column, results, clear in depth:
+        sr = sum(r.success for r in results) / max(len(results), 1)
+        lines.append(f"- {method} / {table} / {column}: success={sr:.3f} {clearance_line(results, clear)}")
+    return "\n".join(lines) + "\n"
 
 
 def to_csv(rows: list[dict[str, str]]) -> str:

@@ -15,7 +15,7 @@ import pytest
 import torch
 
 from cat.envs.config import EnvCfg
-from cat.envs.field_contact import FieldContact, FieldContactCfg, fill_contact_sdf, geom_surface_points
+from cat.envs.field_contact import FieldContact, FieldContactCfg, body_poses, fill_contact_sdf, geom_surface_points
 from cat.envs.math_utils import quat_to_matrix
 from cat.envs.robot import home_qpos
 from cat.envs.scene_set import SceneSet, scene_fields
@@ -186,16 +186,6 @@ def test_backends_keep_the_pose_sensors_of_every_substep(sim):
     torch.testing.assert_close(s.substep_sensordata, sub)
 
 
-def _fk_poses(model: mujoco.MjModel, bodies: list[str], qpos: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
-    data, ids = mujoco.MjData(model), [model.body(b).id for b in bodies]
-    pos, quat = np.zeros((len(qpos), len(ids), 3)), np.zeros((len(qpos), len(ids), 4))
-    for i, q in enumerate(qpos):
-        data.qpos[:] = q
-        mujoco.mj_kinematics(model, data)
-        pos[i], quat[i] = data.xpos[ids], data.xquat[ids]
-    return torch.tensor(pos, dtype=torch.float32), torch.tensor(quat, dtype=torch.float32)
-
-
 @pytest.fixture(scope="module")
 def agreement() -> dict[str, dict[str, tuple[int, int, int, int]]]:
     """Per typical type and judgement: (steps, physical contact steps, field-only, physical-only) over random-action
@@ -225,7 +215,7 @@ def agreement() -> dict[str, dict[str, tuple[int, int, int, int]]]:
             states = [before] + [sim._out_state[:, k, qadr : qadr + sim.model.nq] for k in range(sim.decimation - 1)]
             touching = {m: torch.zeros(16, dtype=torch.bool) for m in judges}
             for q in states:
-                pos, quat = _fk_poses(sim.model, judges["mesh"].bodies, q)
+                pos, quat = body_poses(sim.model, judges["mesh"].bodies, q)
                 sdf = {m: j.body_sdf(sset.bank, idx, pos, quat) < margin for m, j in judges.items()}
                 assert torch.equal(sdf["mesh"], full.body_sdf(sset.bank, idx, pos, quat) < margin)
                 ref = judges["field"].body_sdf_torch(sset.bank, idx, pos, quat)  # the fused kernel's reference

@@ -191,6 +191,21 @@ def _quat_np(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     return _quat_rotate(torch.tensor(q, dtype=torch.float64), torch.tensor(v, dtype=torch.float64)).numpy()
 
 
+def body_poses(
+    model: mujoco.MjModel, bodies: Sequence[str], qpos: np.ndarray, data: mujoco.MjData | None = None
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """(pos (n, B, 3), quat (n, B, 4)) of ``bodies`` for each state row of ``qpos`` (n, nq), by MuJoCo's forward
+    kinematics on ``data`` (a scratch ``MjData`` of ``model``; made when not given): poses without pose sensors."""
+    data = mujoco.MjData(model) if data is None else data
+    ids = [model.body(b).id for b in bodies]
+    pos, quat = np.zeros((len(qpos), len(ids), 3)), np.zeros((len(qpos), len(ids), 4))
+    for i, q in enumerate(qpos):
+        data.qpos[:] = q
+        mujoco.mj_kinematics(model, data)
+        pos[i], quat[i] = data.xpos[ids], data.xquat[ids]
+    return torch.tensor(pos, dtype=torch.float32), torch.tensor(quat, dtype=torch.float32)
+
+
 # --- the judgement ---------------------------------------------------------------------------------------------
 class FieldContact:
     """Contact of each robot body with the obstacles of each env's scene, judged from the field bank's SDF.

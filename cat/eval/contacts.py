@@ -20,7 +20,7 @@ import mujoco
 import numpy as np
 import torch
 
-from cat.envs.field_contact import FieldContact, FieldContactCfg, fill_contact_sdf
+from cat.envs.field_contact import FieldContact, FieldContactCfg, body_poses, fill_contact_sdf
 from cat.envs.scene import PART_SENSOR_PREFIX
 from cat.envs.trial_metrics import TrialResult
 
@@ -80,17 +80,7 @@ class Clearance:
         self.fc = FieldContact(model, env.robot, FieldContactCfg())
         fill_contact_sdf(env.scenes, self.fc.cfg)
         self._model, self._data = model, mujoco.MjData(model)
-        self._ids = [model.body(b).id for b in self.fc.bodies]
         self._batches: list[torch.Tensor] = []
-
-    def _poses(self, qpos: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
-        d, ids = self._data, self._ids
-        pos, quat = np.zeros((len(qpos), len(ids), 3)), np.zeros((len(qpos), len(ids), 4))
-        for i, q in enumerate(qpos):
-            d.qpos[:] = q
-            mujoco.mj_kinematics(self._model, d)
-            pos[i], quat[i] = d.xpos[ids], d.xquat[ids]
-        return torch.tensor(pos, dtype=torch.float32), torch.tensor(quat, dtype=torch.float32)
 
     def on_step(self, env) -> None:
         if int(env.step_count[0]) == 0:  # run_trials placed a new batch (world 0 is in every batch)
@@ -100,7 +90,7 @@ class Clearance:
         if not active.any():
             return
         ids = active.nonzero().flatten()
-        pos, quat = self._poses(env.sim.qpos[ids].cpu().numpy())
+        pos, quat = body_poses(self._model, self.fc.bodies, env.sim.qpos[ids].cpu().numpy(), self._data)
         idx = env.field_source.field_idx[ids.to(env.field_source.field_idx.device)]
         sdf = self.fc.body_sdf(env.scenes.bank, idx, pos, quat).amin(-1).cpu()
         slot = self._batches[-1]

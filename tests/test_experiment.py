@@ -150,6 +150,8 @@ def test_bad_experiment_one_line_nothing_written(tmp_path, caplog, cells, extra,
         ({"methods": {"Ours": "a"}, "table1": {}}, "row 'Ours' must be a list"),
         ({"methods": {"Ours": ["b"]}, "table1": {}}, "unknown cell 'b'"),
         ({"methods": {"Ours": ["a"]}}, "needs table1:, table2: and/or table3:"),
+        ({"methods": {"Ours": ["a"]}, "table1": {}, "perception": "lidar", "live_workers": 0}, "live_workers must"),
+        ({"methods": {"Ours": ["a"]}, "table1": {}, "live_workers": 2}, "needs perception: lidar"),
     ],
 )
 def test_bad_table_one_line_nothing_written(tmp_path, caplog, table, needle):
@@ -157,6 +159,25 @@ def test_bad_table_one_line_nothing_written(tmp_path, caplog, table, needle):
     code, errors = _experiment([f"experiment={exp}", f"root={tmp_path / 'exps'}"], caplog)
     assert code == 2 and len(errors) == 1 and needle in errors[0], errors
     assert not (tmp_path / "exps").exists()
+
+
+def test_live_workers_reach_the_table_command_but_not_its_hash(tmp_path, capsys, caplog):
+    """A LiDAR table's worker count is a speed setting: eval_table.py gets it, the table's identity ignores it."""
+    from cat.experiment.plan import Plan
+    from cat.experiment.spec import load_experiment
+
+    hashes = []
+    for workers in (1, 2):
+        table = {"methods": {"Ours": ["a"]}, "table1": {}, "perception": "lidar", "live_workers": workers}
+        exp = _write(tmp_path, {"a": {"iterations": 1}}, {"t": table})
+        code, errors = _experiment([f"experiment={exp}", f"root={tmp_path / 'exps'}", "dry_run=true"], caplog)
+        out = capsys.readouterr().out
+        assert code == 0 and not errors and "perception=lidar" in out
+        assert ("live_workers=2" in out) == (workers == 2)
+        spec = load_experiment(exp)
+        plan = Plan(spec, str(tmp_path / "exps"))
+        hashes.append(plan.table_hash(spec.tables["t"]))
+    assert hashes[0] is not None and hashes[0] == hashes[1]
 
 
 def test_unknown_experiment_and_option(caplog):

@@ -380,6 +380,7 @@ class Plan:
             f"sim={table.sim}",
             *(
                 [f"perception={table.perception}", f"perception_setting={table.perception_setting}"]
+                + ([f"live_workers={table.live_workers}"] if table.live_workers > 1 else [])
                 if table.perception != "ground_truth"
                 else []
             ),

@@ -93,6 +93,7 @@ class Table:
     sim: str = "mujoco"
     perception: str = "ground_truth"  # eval_table.py perception= (lidar: through the simulated LiDAR and map)
     perception_setting: str = "default"  # with lidar: configs/eval/perception/<name>.yaml
+    live_workers: int = 1  # with lidar: processes sharing a column's scenes (speed only: every trial's result is the same)
     equal_budget: list[str] = field(default_factory=list)  # rows that may differ only in method (one cell each)
 
     def references(self) -> list[str]:
@@ -240,6 +241,11 @@ def _table(name: str, raw: dict) -> Table:
         raise ExperimentError(f"{what}: needs table1:, table2: and/or table3:")
     if raw.get("perception", "ground_truth") not in ("ground_truth", "lidar"):
         raise ExperimentError(f"{what}: perception must be ground_truth or lidar, got {raw['perception']!r}")
+    workers = raw.get("live_workers", 1)
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise ExperimentError(f"{what}: live_workers must be a whole number >= 1, got {workers!r}")
+    if workers > 1 and raw.get("perception", "ground_truth") != "lidar":
+        raise ExperimentError(f"{what}: live_workers={workers} needs perception: lidar (ground-truth trials run batched)")
     rows = _as_list(f"{what}: equal_budget", raw.get("equal_budget"))
     for row in rows:
         if row not in raw["methods"]:

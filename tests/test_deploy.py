@@ -104,63 +104,6 @@ def test_voxel_map_of_box_with_noise(robot_cfg):
     assert not occ[..., 0].any()  # the floor layer (z < 4 cm) stays free
 
 
-def _slab_map(robot_cfg, hit_depth: float):
-    """A ceiling slab 0.95-1.10 m up (under the head LiDAR, ~1.25 m) scanned by a robot walking up to it; return
-    (map occupancy, truth, grid)."""
-    slab = trimesh.creation.box(bounds=[[0.81, -0.59, 0.95], [1.61, 0.61, 1.11]])
-    model = build_env_model(robot_cfg, lambda s: add_obstacles_to_spec(s, slab))
-    d = mujoco.MjData(model)
-    grid = map_grid((-1.0, -1.6), (2.8, 1.6), MapCfg())
-    vm = VoxelMap(grid, MapCfg(hit_depth=hit_depth))
-    lidar = Lidar(model, LidarCfg(range_noise=0.0, dropout=0.0), seed=1)
-    for x in (-0.4, -0.2, 0.0, 0.2):
-        d.qpos[:] = home_qpos(robot_cfg)
-        d.qpos[0] = x
-        mujoco.mj_kinematics(model, d)
-        for _ in range(3):
-            scan = lidar.scan(d)
-            pos, rot = lidar.sensor_pose(d.xpos[lidar.body_id], d.xmat[lidar.body_id].reshape(3, 3))
-            vm.integrate(pos, pos + scan.points_sensor() @ rot.T)
-    return vm.occupied(), occupancy(slab, GridSpec(grid.origin, grid.voxel, grid.shape)), grid
-
-
-def test_solid_behind_returns_fills_a_ceiling_seen_from_above(robot_cfg):
-    """The head LiDAR never sees the slab's underside: as a skin (hit_depth 0) the map holds a quarter of the slab
-    (24 % measured) and its bottom layer hardly at all (5 %); with hit_depth 0.3 m 69 % and 40 % (beams that hit
-    its top at a few degrees only reach 3 cm into it). Behind-marks stay within hit_depth of the slab, and the air
-    the beams crossed stays free."""
-    skin, truth, grid = _slab_map(robot_cfg, 0.0)
-    solid, _, _ = _slab_map(robot_cfg, 0.3)
-
-    def recall(occ, k=slice(None)):
-        return (occ[..., k] & truth[..., k]).sum() / truth[..., k].sum()
-
-    bottom = int(np.nonzero(truth)[2].min())  # the slab's lowest voxel layer
-    assert recall(skin) < 0.4 and recall(solid) > 0.6, (recall(skin), recall(solid))
-    assert recall(skin, bottom) < 0.1 and recall(solid, bottom) > 0.3, (recall(skin, bottom), recall(solid, bottom))
-    gap = ndimage.distance_transform_edt(~truth) * grid.voxel  # [m] from each voxel to the slab
-    assert gap[solid].max() <= 0.3 + grid.voxel  # behind-marks within hit_depth (+ a voxel) of the slab
-    assert not solid[..., : int(0.6 / grid.voxel)].any()  # nothing below 60 cm: the beams saw that air
-
-
-def test_a_beam_through_a_voxel_behind_a_return_frees_it_for_good():
-    grid = map_grid((-1.0, -1.0), (1.0, 1.0), MapCfg())
-    vm = VoxelMap(grid, MapCfg(hit_depth=0.2))
-    wall = np.array([[0.5, 0.0, 0.5]])
-    vm.integrate((-0.8, 0.0, 0.5), wall)
-    occ = vm.occupied()
-    ijk = lambda p: tuple(np.floor((np.asarray(p) - grid.origin) / grid.voxel).astype(int))  # noqa: E731
-    assert occ[ijk((0.5, 0.0, 0.5))] and occ[ijk((0.62, 0.0, 0.5))]  # the return and 12 cm behind it
-    assert not occ[ijk((0.78, 0.0, 0.5))]  # 28 cm behind: past hit_depth
-    vm.integrate((0.62, 0.8, 0.5), np.array([[0.62, -0.8, 0.5]]))  # a beam across, through the behind voxel
-    vm.integrate((-0.8, 0.0, 0.5), wall)  # the same return again marks it behind, but it was seen free
-    assert not vm.occupied()[ijk((0.62, 0.0, 0.5))] and vm.occupied()[ijk((0.5, 0.0, 0.5))]
-    with pytest.raises(ValueError, match="l_behind"):
-        VoxelMap(grid, MapCfg(hit_depth=0.2, l_behind=0.5))
-    with pytest.raises(ValueError, match="hit_depth"):
-        VoxelMap(grid, MapCfg(hit_depth=-0.1))
-
-
 def test_window_is_on_the_map_lattice_and_geofenced():
     grid = map_grid((-1.0, -1.0), (1.0, 1.0), MapCfg())
     vm = VoxelMap(grid)

@@ -33,7 +33,6 @@ from cat.deploy.lidar import LidarCfg
 from cat.deploy.perception import PerceptionCfg
 from cat.deploy.policy import PolicySpec
 from cat.deploy.runtime import DeployCfg, Runtime, _check_deployable
-from cat.deploy.voxel_map import MapCfg
 from cat.envs.trial_metrics import TrialResult
 from cat.eval.manifest import ManifestError, MethodRun
 from cat.eval.runner import SceneGroup
@@ -59,7 +58,6 @@ class LiveSettingCfg:
     odom_yaw_noise: float = 0.0
     odom_drift_xy: float = 0.0
     odom_drift_yaw: float = 0.0
-    hit_depth: float = 0.0  # the map's solid-behind-a-return depth [m] (cat.deploy.voxel_map.MapCfg.hit_depth)
 
 
 def load_setting(name: str) -> LiveSettingCfg:
@@ -80,9 +78,7 @@ def deploy_cfg(setting: LiveSettingCfg, seed: int) -> DeployCfg:
     """The runtime's settings for ``setting`` (lockstep, so a trial is reproducible)."""
     lidar = LidarCfg(range_noise=setting.range_noise, dropout=setting.dropout, rays_per_scan=setting.rays_per_scan)
     return DeployCfg(
-        perception=PerceptionCfg(
-            lidar=lidar, map=MapCfg(hit_depth=setting.hit_depth), rate_hz=setting.rate_hz, latency_s=setting.latency_s
-        ),
+        perception=PerceptionCfg(lidar=lidar, rate_hz=setting.rate_hz, latency_s=setting.latency_s),
         realtime=False,
         map_margin=MAP_MARGIN,
         odom_pos_noise=setting.odom_pos_noise,

@@ -8,12 +8,6 @@ log-odds 0 and count as free, like the field's "outside the grid is free" rule. 
 are the floor: they clear the beam's path but are not obstacles (the floor is never part of a scene's
 obstacles, in training or here).
 
-Solid behind a return (``MapCfg.hit_depth``): a sensor sees surfaces, not solids. Never-observed voxels up to
-``hit_depth`` behind a return (along its beam) are set to ``l_behind`` (occupied) unless the same scan saw
-them, so an obstacle seen from one side is a slab, not a skin: a head LiDAR above a low ceiling sees its front
-face and top but never its underside, and without this the field under the ceiling is free space. One beam
-through such a voxel (``l_behind`` + ``l_miss`` < 0) makes it observed free, for good.
-
 Beams are traversed exactly (Amanatides-Woo voxel walk) in a Warp kernel, one thread per beam.
 """
 
@@ -47,10 +41,6 @@ class MapCfg:
     """Occupied where log-odds > this (p > 0.5): one hit on an unknown voxel suffices."""
     ground_z: float = 0.06
     """Returns below this height [m] are floor: they clear space but are not obstacles (range noise 2 cm, 3σ)."""
-    hit_depth: float = 0.0
-    """m: never-observed voxels this far behind a return count as solid (0: a return marks its own voxel only)."""
-    l_behind: float = 0.3
-    """Log-odds given to such a voxel: occupied, and one beam through it (``l_miss``) makes it observed free."""
     height: float = 1.4
     """Map height above the floor [m]: the field window's height (DESIGN §4)."""
 
@@ -83,14 +73,10 @@ def _trace_kernel(
     ny: int,
     nz: int,
     ground_z: float,
-    behind_steps: int,
-    behind_depth: float,
     miss: wp.array3d(dtype=wp.uint8),
     hit: wp.array3d(dtype=wp.uint8),
-    behind: wp.array3d(dtype=wp.uint8),
 ):
-    """One beam: mark the voxels it crosses (before its end voxel) as missed, its end voxel as hit, and (an
-    obstacle return) the voxels after it along the beam, up to ``behind_depth`` voxel edges, as behind."""
+    """One beam: mark the voxels it crosses (before its end voxel) as missed, its end voxel as hit."""
     r = wp.tid()
     p0 = (origin - grid_origin) * inv_voxel
     end = points[r]
@@ -129,22 +115,6 @@ def _trace_kernel(
             tz += dz
     if end[2] >= ground_z and ie >= 0 and ie < nx and je >= 0 and je < ny and ke >= 0 and ke < nz:
         hit[ie, je, ke] = wp.uint8(1)
-        beam = wp.length(d)
-        for _b in range(behind_steps):  # i, j, k stand on the end voxel: walk on past it
-            if (wp.min(tx, wp.min(ty, tz)) - 1.0) * beam > behind_depth:  # the next voxel starts too far behind
-                break
-            if tx <= ty and tx <= tz:
-                i += si
-                tx += dx
-            elif ty <= tz:
-                j += sj
-                ty += dy
-            else:
-                k += sk
-                tz += dz
-            if i < 0 or i >= nx or j < 0 or j >= ny or k < 0 or k >= nz:
-                break
-            behind[i, j, k] = wp.uint8(1)
 
 
 @wp.kernel
@@ -152,18 +122,16 @@ def _update_kernel(
     logodds: wp.array3d(dtype=float),
     miss: wp.array3d(dtype=wp.uint8),
     hit: wp.array3d(dtype=wp.uint8),
-    behind: wp.array3d(dtype=wp.uint8),
     l_hit: float,
     l_miss: float,
     l_min: float,
     l_max: float,
-    l_behind: float,
     i0: int,
     j0: int,
     k0: int,
 ):
-    """Apply one scan's marks (hit wins, then miss, then behind, which only sets never-observed voxels) with
-    clamping, and clear the marks; the launch covers the scan's box starting at voxel ``(i0, j0, k0)``."""
+    """Apply one scan's marks (hit wins) with clamping, and clear the marks; the launch covers the scan's box
+    starting at voxel ``(i0, j0, k0)``."""
     ii, jj, kk = wp.tid()
     i = ii + i0
     j = jj + j0
@@ -172,11 +140,8 @@ def _update_kernel(
         logodds[i, j, k] = wp.min(logodds[i, j, k] + l_hit, l_max)
     elif miss[i, j, k] != wp.uint8(0):
         logodds[i, j, k] = wp.max(logodds[i, j, k] + l_miss, l_min)
-    elif behind[i, j, k] != wp.uint8(0) and logodds[i, j, k] == 0.0:
-        logodds[i, j, k] = l_behind
     hit[i, j, k] = wp.uint8(0)
     miss[i, j, k] = wp.uint8(0)
-    behind[i, j, k] = wp.uint8(0)
 
 
 def map_grid(lower_xy, upper_xy, cfg: MapCfg) -> Grid:
@@ -200,15 +165,6 @@ class VoxelMap:
         self._logodds = wp.zeros(grid.shape, dtype=float, device=self.device)
         self._miss = wp.zeros(grid.shape, dtype=wp.uint8, device=self.device)
         self._hit = wp.zeros(grid.shape, dtype=wp.uint8, device=self.device)
-        self._behind = wp.zeros(grid.shape, dtype=wp.uint8, device=self.device)
-        c = self.cfg
-        if c.hit_depth < 0 or not c.l_occupied < c.l_behind < c.l_occupied - c.l_miss:
-            raise ValueError(
-                f"MapCfg: hit_depth={c.hit_depth} must be >= 0 and l_behind={c.l_behind} between l_occupied="
-                f"{c.l_occupied} and l_occupied - l_miss={c.l_occupied - c.l_miss} (occupied until one beam passes)"
-            )
-        # a walk of L voxel edges crosses at most sqrt(3) L + 3 faces: enough steps for hit_depth in any direction
-        self._behind_steps = int(np.ceil(np.sqrt(3.0) * c.hit_depth / c.voxel)) + 3 if c.hit_depth > 0 else 0
         self._lock = threading.Lock()
         self.scans = 0
 
@@ -231,21 +187,15 @@ class VoxelMap:
                     1.0 / g.voxel,
                     *g.shape,
                     cfg.ground_z,
-                    self._behind_steps,
-                    cfg.hit_depth / g.voxel,
                     self._miss,
                     self._hit,
-                    self._behind,
                 ],
                 device=self.device,
             )
-            # only voxels in the box spanned by the sensor and its returns (+ hit_depth) can have been marked
+            # only voxels in the box spanned by the sensor and its returns can have been marked
             span = np.vstack([pts, origin[None]])
-            pad = cfg.hit_depth + g.voxel if self._behind_steps else 0.0
-            lo = np.clip(np.floor((span.min(0) - pad - g.origin) / g.voxel).astype(int), 0, np.array(g.shape) - 1)
-            hi = np.clip(
-                np.floor((span.max(0) + pad - g.origin) / g.voxel).astype(int) + 1, lo + 1, np.array(g.shape)
-            )
+            lo = np.clip(np.floor((span.min(0) - g.origin) / g.voxel).astype(int), 0, np.array(g.shape) - 1)
+            hi = np.clip(np.floor((span.max(0) - g.origin) / g.voxel).astype(int) + 1, lo + 1, np.array(g.shape))
             wp.launch(
                 _update_kernel,
                 dim=tuple(int(v) for v in hi - lo),
@@ -253,12 +203,10 @@ class VoxelMap:
                     self._logodds,
                     self._miss,
                     self._hit,
-                    self._behind,
                     cfg.l_hit,
                     cfg.l_miss,
                     cfg.l_min,
                     cfg.l_max,
-                    cfg.l_behind,
                     *(int(v) for v in lo),
                 ],
                 device=self.device,

@@ -158,3 +158,17 @@ def test_warmup_scenes_train_but_are_never_evaluated(tmp_path):
     assert [s.difficulty for s in evaluated.scenes] == pytest.approx([0.0, 0.5, 1.0])
     with pytest.raises(ValueError, match="warmup_variants"):
         validate_train_cfg(load_config(["task=hurdle_crouch", f"task.scene_dir={tmp_path}"]))
+
+
+def test_trials_ignore_how_training_drew_its_scenes():
+    """A policy trained with group weights is scored like any other: trials turn the curriculum off and name their
+    scenes, so the weights are dropped from the trial env (was: every table of such a run refused to build)."""
+    from cat.eval.runner import EvalCfg, eval_task
+
+    cfg = EnvCfg(num_envs=2, scene_kind="typical")
+    cfg.curriculum.group_weights = {"crouch-pass": 3.0}
+    trial_cfg = eval_task(cfg, 2, EvalCfg())
+    scenes = SceneSet.typical(["hurdle-crouch", "crouch-pass"], num_envs=2, variants=1)
+    env = TraversalEnv(trial_cfg, sim="mujoco", scenes=scenes, seed=1)
+    assert env.curriculum is None and trial_cfg.curriculum.group_weights == {}
+    assert cfg.curriculum.group_weights == {"crouch-pass": 3.0}  # the run's own config is untouched

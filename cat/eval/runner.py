@@ -141,6 +141,7 @@ def eval_task(task: EnvCfg, num_envs: int, cfg: EvalCfg) -> EnvCfg:
     t.domain_rand.enabled = cfg.domain_rand
     t.push.enabled = cfg.push
     t.curriculum.enabled = False
+    t.curriculum.group_weights = {}  # how training drew its scenes; trials name theirs
     t.episodes = EpisodeCfg()  # trials place start and goal themselves: no free-episode sampling to build
     t.ghost_obstacles, t.ghost_parts, t.ghost_parts_physical = False, [], 0.0  # training aids: trials are physical
     t.success = copy.deepcopy(cfg.success)

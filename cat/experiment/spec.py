@@ -93,7 +93,7 @@ class Table:
     sim: str = "mujoco"
     perception: str = "ground_truth"  # eval_table.py perception= (lidar: through the simulated LiDAR and map)
     perception_setting: str = "default"  # with lidar: configs/eval/perception/<name>.yaml
-    live_workers: int = 1  # with lidar: processes sharing a column's scenes (speed only: every trial's result is the same)
+    live_workers: int = 1  # with lidar: processes sharing a column's scenes (speed only: the trials are the same)
     equal_budget: list[str] = field(default_factory=list)  # rows that may differ only in method (one cell each)
 
     def references(self) -> list[str]:
@@ -245,7 +245,7 @@ def _table(name: str, raw: dict) -> Table:
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise ExperimentError(f"{what}: live_workers must be a whole number >= 1, got {workers!r}")
     if workers > 1 and raw.get("perception", "ground_truth") != "lidar":
-        raise ExperimentError(f"{what}: live_workers={workers} needs perception: lidar (ground-truth trials run batched)")
+        raise ExperimentError(f"{what}: live_workers={workers} needs perception: lidar (ground truth runs batched)")
     rows = _as_list(f"{what}: equal_budget", raw.get("equal_budget"))
     for row in rows:
         if row not in raw["methods"]:

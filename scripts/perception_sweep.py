@@ -1,9 +1,10 @@
 """Robustness sweep through the simulated LiDAR: ``python scripts/perception_sweep.py manifest=<yaml> out=<dir>``.
 
 Keys: ``sweep=`` (default ``configs/eval/perception_sweep.yaml``: a base perception setting and the axes raised one
-at a time), ``trials_per_scene=``, ``seed=``, ``time_s=``, ``radius=``. For each axis and level the manifest is
-scored with ``eval_table.py perception=lidar`` (same trials at every level); writes ``<dir>/sweep.csv`` and
-``<dir>/perception_sweep.png`` (SR against the level, a panel per axis) and prints the CSV.
+at a time), ``trials_per_scene=``, ``seed=``, ``time_s=``, ``radius=``, ``live_workers=``. For each axis and level
+the manifest is scored with ``eval_table.py perception=lidar`` (same trials at every level); writes
+``<dir>/sweep.csv`` and ``<dir>/perception_sweep.png`` (SR against the level, a panel per axis) and prints the
+CSV. Finished levels are kept in ``<dir>/levels/``: rerun the same command to resume a sweep cut short.
 """
 
 from __future__ import annotations

@@ -296,6 +296,19 @@ def test_perception_sweep_scores_each_level_and_plots(tmp_path, monkeypatch, cap
         ("dropout", "0.5", "Hold", "1"),
     ]
     assert (out / "perception_sweep.png").stat().st_size > 0
+    # a rerun on the same out plays only the levels not kept (a sweep is resumable); a changed window replays all
+    assert len(list((out / "levels").glob("*.csv"))) == 2
+    sweep.write_text(yaml.safe_dump({"base": "default", "axes": {"dropout": [0.0, 0.5, 0.25]}}))
+    caplog.clear()
+    with caplog.at_level(logging.INFO):
+        assert script.main([f"manifest={man}", f"out={out}", f"sweep={sweep}", "time_s=0.5"]) == 0
+    kept = [r.getMessage() for r in caplog.records if "kept from a previous sitting" in r.getMessage()]
+    assert len(kept) == 2 and _rows_of(out / "sweep.csv")[:2] == rows
+    assert [r["level"] for r in _rows_of(out / "sweep.csv")] == ["0", "0.5", "0.25"]
+    caplog.clear()
+    with caplog.at_level(logging.INFO):
+        assert script.main([f"manifest={man}", f"out={out}", f"sweep={sweep}", "time_s=0.4"]) == 0
+    assert not [r for r in caplog.records if "kept from a previous sitting" in r.getMessage()]
     sweep.write_text(yaml.safe_dump({"axes": {"droput": [0.1]}}))
     caplog.clear()
     with caplog.at_level(logging.ERROR):

@@ -5,11 +5,16 @@ with their levels. For each axis and level the manifest is evaluated with ``perc
 setting with that one field changed (``cat.eval.evaluate``, the same trials at every level), and the SR and DE of
 every row are collected: ``sweep.csv`` (axis, level, method, trials, sr, de) and one plot, SR against the level,
 a panel per axis (``perception_sweep.png``).
+
+A sweep is hours on a small machine, so each finished level is kept under ``<out>/levels/`` (its rows, keyed by
+everything that decides them: manifest text, setting, trials, seed, window) and a rerun with the same ``out``
+plays only the levels not kept; a level is written whole or not at all.
 """
 
 from __future__ import annotations
 
 import csv
+import hashlib
 import io
 import logging
 from dataclasses import dataclass, fields, replace
@@ -18,7 +23,7 @@ from pathlib import Path
 import yaml
 
 from cat.deploy.live_eval import LiveSettingCfg, LiveTrials, load_setting
-from cat.eval.evaluate import EvalTableCfg, evaluate
+from cat.eval.evaluate import EvalTableCfg, evaluate, write_atomically
 
 log = logging.getLogger(__name__)
 
@@ -36,6 +41,7 @@ class SweepCfg:
     seed: int = 0
     time_s: float = 5.0
     radius: float = 0.1
+    live_workers: int = 1  # processes sharing a column's scenes (speed only: the trials are the same)
 
 
 def load_sweep(path: str) -> tuple[str, LiveSettingCfg, dict[str, list[float]]]:
@@ -60,14 +66,40 @@ def load_sweep(path: str) -> tuple[str, LiveSettingCfg, dict[str, list[float]]]:
     return base, load_setting(base), {str(a): [float(v) for v in levels] for a, levels in axes.items()}
 
 
+def _level_key(cfg: SweepCfg, setting: LiveSettingCfg) -> str:
+    """What decides a level's rows (not ``live_workers``: trials do not depend on where they run)."""
+    text = Path(cfg.manifest).read_text() if Path(cfg.manifest).is_file() else cfg.manifest
+    parts = (text, repr(setting), cfg.trials_per_scene, cfg.seed, cfg.time_s, cfg.radius)
+    return hashlib.sha256(repr(parts).encode()).hexdigest()[:16]
+
+
+def _read_rows(text: str) -> list[dict]:
+    return list(csv.DictReader(io.StringIO(text)))
+
+
+def _write_rows(rows: list[dict]) -> str:
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=SWEEP_COLUMNS, lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows)
+    return buf.getvalue()
+
+
 def run_sweep(cfg: SweepCfg) -> tuple[list[dict], dict[str, str]]:
-    """(sweep rows, {file name: text}); writes nothing."""
+    """(sweep rows, {file name: text}). Writes only the finished levels' rows under ``<out>/levels/`` and reuses
+    those a previous sitting kept."""
     base_name, base, axes = load_sweep(cfg.sweep)
+    kept = Path(cfg.out) / "levels"
     rows = []
     for axis, levels in axes.items():
         for level in levels:
             setting = replace(base, **{axis: type(getattr(base, axis))(level)})
             name = f"{base_name} with {axis}={level:g}"
+            cache = kept / f"{axis}={level:g}-{_level_key(cfg, setting)}.csv"
+            if cache.is_file():
+                log.info("sweep: %s kept from a previous sitting (%s)", name, cache)
+                rows += _read_rows(cache.read_text())
+                continue
             ecfg = EvalTableCfg(
                 manifest=cfg.manifest,
                 out=cfg.out,
@@ -79,20 +111,19 @@ def run_sweep(cfg: SweepCfg) -> tuple[list[dict], dict[str, str]]:
                 perception_setting=name,
             )
             log.info("sweep: %s", name)
-            trials, _ = evaluate(ecfg, LiveTrials(setting))
+            trials, _ = evaluate(ecfg, LiveTrials(setting, cfg.live_workers))
+            mine_rows = []
             for method in dict.fromkeys(r["method"] for r in trials):
                 mine = [r for r in trials if r["method"] == method]
                 sr = 100.0 * sum(int(r["success"]) for r in mine) / len(mine)
                 de = sum(float(r["de"]) for r in mine) / len(mine)
-                rows.append(
+                mine_rows.append(
                     {"axis": axis, "level": f"{level:g}", "method": method, "trials": str(len(mine)),
                      "sr": f"{sr:.1f}", "de": f"{de:.4f}"}
                 )  # fmt: skip
-    buf = io.StringIO()
-    writer = csv.DictWriter(buf, fieldnames=SWEEP_COLUMNS, lineterminator="\n")
-    writer.writeheader()
-    writer.writerows(rows)
-    return rows, {"sweep.csv": buf.getvalue()}
+            write_atomically(kept, {cache.name: _write_rows(mine_rows)})
+            rows += mine_rows
+    return rows, {"sweep.csv": _write_rows(rows)}
 
 
 def plot(rows: list[dict], path: str | Path, title: str = "") -> None:

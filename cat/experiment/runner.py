@@ -101,7 +101,8 @@ class Runner:
                 blocked = [u for u in units if not self._inputs_ready(u)]
                 if blocked:
                     log.warning("stage %d: %s wait for unfinished inputs", k, ", ".join(u.key for u in blocked))
-                ready = [u for u in units if u not in blocked]
+                # seed-major: a sitting trains seed 0 of every cell before any seed 1 (a column first stands whole)
+                ready = sorted((u for u in units if u not in blocked), key=lambda u: u.seed)
                 if ready:
                     self._train_stage(k, ready, left)
                 bar.update(len(ready))

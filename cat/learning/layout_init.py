@@ -146,7 +146,7 @@ def partial_state(
     if set(prior) != set(fresh):
         extra = sorted(set(prior) ^ set(fresh))
         raise CheckpointError(f"{what}: the prior's network differs in its tensors ({', '.join(extra[:3])})")
-    first = _first_linear(fresh)
+    first = first_linear(fresh)
     by_term = {b.term: b for b in old}
     src: list[int] = []
     dst: list[int] = []
@@ -188,7 +188,7 @@ def partial_state(
     return out, report
 
 
-def _first_linear(state: dict[str, torch.Tensor]) -> str:
+def first_linear(state: dict[str, torch.Tensor]) -> str:
     """The key of the first linear layer's weight of an rsl_rl ``MLPModel`` state (``mlp.<k>.weight``)."""
     keys = [k for k, v in state.items() if k.startswith("mlp.") and k.endswith(".weight") and v.dim() == 2]
     return min(keys, key=lambda k: int(k.split(".")[1]))
@@ -237,7 +237,7 @@ def init_from_prior(alg, env, path: str) -> dict[str, ModelInit]:
         prior_terms = model_terms(prior_cfg.task, list(prior_cfg.algo.obs_groups[name]), what)
         model_terms(env.cfg, groups, what)  # history refused here too
         state = ckpt[MODELS[name]]
-        width = state[_first_linear(state)].shape[1]
+        width = state[first_linear(state)].shape[1]
         known = {b.term: b.width for b in new}
         for t in set(prior_terms) & set(known):
             if term_layout(prior_cfg.task, t) != term_layout(env.cfg, t):

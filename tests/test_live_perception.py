@@ -309,6 +309,15 @@ def test_perception_sweep_scores_each_level_and_plots(tmp_path, monkeypatch, cap
     with caplog.at_level(logging.INFO):
         assert script.main([f"manifest={man}", f"out={out}", f"sweep={sweep}", "time_s=0.4"]) == 0
     assert not [r for r in caplog.records if "kept from a previous sitting" in r.getMessage()]
+    # a level whose setting equals one kept under another axis (the base setting's) is read from it
+    sweep.write_text(yaml.safe_dump({"base": "default", "axes": {"dropout": [0.05], "latency_s": [0.1]}}))
+    caplog.clear()
+    with caplog.at_level(logging.INFO):
+        assert script.main([f"manifest={man}", f"out={out}", f"sweep={sweep}", "time_s=0.4"]) == 0
+    kept = [r.getMessage() for r in caplog.records if "kept from a previous sitting" in r.getMessage()]
+    both = _rows_of(out / "sweep.csv")
+    assert len(kept) == 1 and [(r["axis"], r["level"]) for r in both] == [("dropout", "0.05"), ("latency_s", "0.1")]
+    assert both[0]["sr"] == both[1]["sr"] and both[0]["de"] == both[1]["de"]
     sweep.write_text(yaml.safe_dump({"axes": {"droput": [0.1]}}))
     caplog.clear()
     with caplog.at_level(logging.ERROR):

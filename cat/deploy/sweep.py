@@ -8,7 +8,8 @@ a panel per axis (``perception_sweep.png``).
 
 A sweep is hours on a small machine, so each finished level is kept under ``<out>/levels/`` (its rows, keyed by
 everything that decides them: manifest text, setting, trials, seed, window) and a rerun with the same ``out``
-plays only the levels not kept; a level is written whole or not at all.
+plays only the levels not kept (a level whose setting equals one kept under another axis, such as each axis's base
+level, is read from it); a level is written whole or not at all.
 """
 
 from __future__ import annotations
@@ -95,10 +96,13 @@ def run_sweep(cfg: SweepCfg) -> tuple[list[dict], dict[str, str]]:
         for level in levels:
             setting = replace(base, **{axis: type(getattr(base, axis))(level)})
             name = f"{base_name} with {axis}={level:g}"
-            cache = kept / f"{axis}={level:g}-{_level_key(cfg, setting)}.csv"
-            if cache.is_file():
-                log.info("sweep: %s kept from a previous sitting (%s)", name, cache)
-                rows += _read_rows(cache.read_text())
+            key = _level_key(cfg, setting)
+            cache = kept / f"{axis}={level:g}-{key}.csv"
+            # the same setting under another axis (each axis's base level is the base setting) is the same trials
+            hits = [cache] if cache.is_file() else sorted(kept.glob(f"*-{key}.csv"))
+            if hits:
+                log.info("sweep: %s kept from a previous sitting (%s)", name, hits[0])
+                rows += [{**r, "axis": axis, "level": f"{level:g}"} for r in _read_rows(hits[0].read_text())]
                 continue
             ecfg = EvalTableCfg(
                 manifest=cfg.manifest,

@@ -251,7 +251,11 @@ def test_shipped_recipes_compose_the_shipped_configs(tmp_path):
 
     exp = load_experiment("shipped")
     plan = Plan(exp, str(tmp_path))
-    shipped = sorted(p.name for p in (REPO / "checkpoints").iterdir() if (p / "config.yaml").is_file())
+    shipped = sorted(
+        p.name
+        for p in (REPO / "checkpoints").iterdir()
+        if (p / "config.yaml").is_file() and not (p / "average.yaml").is_file()  # averaged: next test
+    )
     assert shipped and set(shipped) <= set(exp.cells)
     for name in shipped:
         unit = plan.units[f"{name}@0"]
@@ -264,6 +268,31 @@ def test_shipped_recipes_compose_the_shipped_configs(tmp_path):
         if theirs.get("sim.obstacles") == "physical":  # field-judged contact's settings are inert in physical worlds
             keys = {k for k in keys if not k.startswith("sim.field_contact.")}
         assert {k: (mine.get(k), theirs.get(k)) for k in keys if mine.get(k) != theirs.get(k)} == {}, name
+
+
+def test_averaged_checkpoints_are_their_recipe():
+    """A shipped folder made by scripts/average.py (no training recipe) is reproduced by its average.yaml: the
+    parents are shipped, the config is parent a's, and averaging them again gives the shipped weights exactly."""
+    import torch
+    import yaml
+
+    from cat.learning.average import average_states
+
+    folders = sorted(p for p in (REPO / "checkpoints").iterdir() if (p / "average.yaml").is_file())
+    assert folders, "no averaged checkpoint shipped (generalist_hybrid_v3, v4)"
+    for folder in folders:
+        note = yaml.safe_load((folder / "average.yaml").read_text())
+        a, b = REPO / note["a"], REPO / note["b"]
+        assert a.is_file() and b.is_file(), folder.name
+        assert (folder / "config.yaml").read_text() == (a.parent / "config.yaml").read_text(), folder.name
+        (model,) = folder.glob("model_*.pt")
+        mine = torch.load(model, weights_only=True)["student_state_dict"]
+        again = average_states(
+            torch.load(a, weights_only=True)["student_state_dict"],
+            torch.load(b, weights_only=True)["student_state_dict"],
+            float(note["alpha"]),
+        )
+        assert all(torch.equal(mine[k], again[k]) for k in mine), folder.name
 
 
 def test_a_spent_sitting_leaves_the_rest_for_the_next(tmp_path, caplog, monkeypatch):

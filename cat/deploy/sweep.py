@@ -67,10 +67,9 @@ def load_sweep(path: str) -> tuple[str, LiveSettingCfg, dict[str, list[float]]]:
     return base, load_setting(base), {str(a): [float(v) for v in levels] for a, levels in axes.items()}
 
 
-def _level_key(cfg: SweepCfg, setting: LiveSettingCfg) -> str:
+def _level_key(cfg: SweepCfg, manifest_text: str, setting: LiveSettingCfg) -> str:
     """What decides a level's rows (not ``live_workers``: trials do not depend on where they run)."""
-    text = Path(cfg.manifest).read_text() if Path(cfg.manifest).is_file() else cfg.manifest
-    parts = (text, repr(setting), cfg.trials_per_scene, cfg.seed, cfg.time_s, cfg.radius)
+    parts = (manifest_text, repr(setting), cfg.trials_per_scene, cfg.seed, cfg.time_s, cfg.radius)
     return hashlib.sha256(repr(parts).encode()).hexdigest()[:16]
 
 
@@ -91,15 +90,16 @@ def run_sweep(cfg: SweepCfg) -> tuple[list[dict], dict[str, str]]:
     those a previous sitting kept."""
     base_name, base, axes = load_sweep(cfg.sweep)
     kept = Path(cfg.out) / "levels"
+    manifest_text = Path(cfg.manifest).read_text() if Path(cfg.manifest).is_file() else cfg.manifest
     rows = []
     for axis, levels in axes.items():
         for level in levels:
             setting = replace(base, **{axis: type(getattr(base, axis))(level)})
             name = f"{base_name} with {axis}={level:g}"
-            key = _level_key(cfg, setting)
+            key = _level_key(cfg, manifest_text, setting)
             cache = kept / f"{axis}={level:g}-{key}.csv"
-            # the same setting under another axis (each axis's base level is the base setting) is the same trials
-            hits = [cache] if cache.is_file() else sorted(kept.glob(f"*-{key}.csv"))
+            # any axis's file of this setting (each axis's base level is the base setting) holds the same trials
+            hits = sorted(kept.glob(f"*-{key}.csv"))
             if hits:
                 log.info("sweep: %s kept from a previous sitting (%s)", name, hits[0])
                 rows += [{**r, "axis": axis, "level": f"{level:g}"} for r in _read_rows(hits[0].read_text())]

@@ -37,8 +37,9 @@ class AverageCfg:
     force: bool = False  # replace a model already in out
 
 
-def _models(ckpt: dict) -> list[str]:
-    return [k for k in ckpt if k.endswith("_state_dict") and not k.startswith("optimizer") and k != "teachers"]
+def model_keys(ckpt: dict) -> list[str]:
+    """The checkpoint's network state dicts (``actor_state_dict``, ``student_state_dict``, ...), not the optimiser's."""
+    return [k for k in ckpt if k.endswith("_state_dict") and not k.startswith("optimizer")]
 
 
 def _in_normaliser_of(state_b: dict, state_a: dict) -> dict:
@@ -91,13 +92,13 @@ def average(cfg: AverageCfg) -> Path:
         raise CheckpointError(
             f"{src_a} and {src_b}: different observation layouts (task.observations of their configs)"
         )
-    if _models(ck_a) != _models(ck_b):
-        raise CheckpointError(f"{src_a} holds {_models(ck_a)}, {src_b} {_models(ck_b)}: not the same kind of run")
+    if model_keys(ck_a) != model_keys(ck_b):
+        raise CheckpointError(f"{src_a} holds {model_keys(ck_a)}, {src_b} {model_keys(ck_b)}: not the same kind of run")
     out = Path(cfg.out)
     if out.is_dir() and any(out.glob("model_*.pt")) and not cfg.force:
         raise FileExistsError(f"{out} already holds a model: pass force=true to replace it")
     mixed = {k: v for k, v in ck_a.items() if not k.startswith("optimizer")}
-    for key in _models(ck_a):
+    for key in model_keys(ck_a):
         mixed[key] = average_states(ck_a[key], ck_b[key], cfg.alpha, f"{key} of {src_a.name} / {src_b.name}")
     how = "(1 - alpha) a + alpha b; b's first layer re-expressed in a's normaliser (cat/learning/average.py)"
     note = {"a": str(src_a), "b": str(src_b), "alpha": cfg.alpha, "how": how}

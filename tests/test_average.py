@@ -84,3 +84,25 @@ def test_script_on_shipped_students(tmp_path, caplog):
         average(AverageCfg(a=str(V2), b=str(TYPICAL), alpha=1.5, out=str(tmp_path / "bad")))
     assert not (tmp_path / "bad").exists()
     assert mod.main([f"a={V2}", f"b={TYPICAL}", f"out={out}"]) == 2  # out holds a model: force=true needed
+
+
+def test_a_ppo_fine_tune_and_its_distilled_parent_mix_their_policies(tmp_path, caplog):
+    """WiSE-FT: the shipped PPO fine-tune (actor + critic) and the DAgger student it started from (student +
+    teachers) mix through their deployable networks only; a's critic-free layout is kept, alpha=1 plays b's actor."""
+    parent = REPO / "checkpoints/generalist/model_4505.pt"
+    tuned = REPO / "checkpoints/generalist_ft/model_914.pt"
+    out = tmp_path / "wise"
+    mod = load_script(REPO / "scripts" / "average.py")
+    assert mod.main([f"a={parent}", f"b={tuned}", "alpha=1", f"out={out}"]) == 0
+    mixed = torch.load(out / "model_4505.pt", weights_only=False)
+    assert "student_state_dict" in mixed and "actor_state_dict" not in mixed and "critic_state_dict" not in mixed
+    actor = torch.load(tuned, weights_only=True)["actor_state_dict"]
+    x = torch.randn(32, actor["mlp.0.weight"].shape[1]) * actor["obs_normalizer._std"] + actor["obs_normalizer._mean"]
+    assert torch.allclose(_forward(mixed["student_state_dict"], x), _forward(actor, x), atol=1e-4)
+    assert mod.main([f"a={tuned}", f"b={parent}", "alpha=0", f"out={tmp_path / 'back'}"]) == 0
+    back = torch.load(tmp_path / "back" / "model_914.pt", weights_only=False)
+    assert set(back) >= {"actor_state_dict", "iter"} and "critic_state_dict" not in back
+    assert all(torch.equal(back["actor_state_dict"][k], actor[k]) for k in actor)
+    voxel = REPO / "checkpoints/table3/voxel/seed0/model_610.pt"  # a PPO run reading another layout
+    assert mod.main([f"a={parent}", f"b={voxel}", f"out={tmp_path / 'bad'}"]) == 2
+    assert not (tmp_path / "bad").exists()

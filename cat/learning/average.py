@@ -8,6 +8,10 @@ normaliser is part of its input map, so ``b``'s first linear layer is first re-e
 different observation layouts or network shapes. The result is weights only (Adam moments of two runs do not
 average into a resumable state), written with ``a``'s ``config.yaml`` and an ``average.yaml`` saying what it is.
 
+Two runs of different kinds (a PPO fine-tune of a student, ``algo=ppo_student``, and the distilled student it
+started from: WiSE-FT, Wortsman et al. 2022) are averaged through their deployable networks only (PPO's actor,
+the student: ``policy_model``), which must read the same observation groups; ``a``'s other networks are dropped.
+
 ``python scripts/average.py a=<model_*.pt> b=<model_*.pt> alpha=0.5 out=checkpoints/<name> [force=true]``
 """
 
@@ -24,6 +28,8 @@ import yaml
 from cat.checkpoint_io import CheckpointError, read_checkpoint, resolve_checkpoint
 from cat.cli import Script, dataclass_loader
 from cat.learning.layout_init import NORM_KEYS, first_linear
+from cat.run.config import policy_model
+from cat.run.config_file import load_run_config
 
 EPS = 1e-2  # rsl_rl's EmpiricalNormalization: (x - mean) / (std + eps)
 
@@ -78,6 +84,20 @@ def _observations(config: Path) -> dict:
     return (raw.get("task") or {}).get("observations") or {}
 
 
+def _network_pairs(src_a: Path, ck_a: dict, src_b: Path, ck_b: dict) -> list[tuple[str, str]]:
+    """Which network of ``a`` is mixed with which of ``b``: all of them for runs of one kind, else the deployable
+    networks (``policy_model``), which must read the same observation groups."""
+    if model_keys(ck_a) == model_keys(ck_b):
+        return [(k, k) for k in model_keys(ck_a)]
+    pa, pb = policy_model(load_run_config(src_a).algo), policy_model(load_run_config(src_b).algo)
+    if pa.obs_groups != pb.obs_groups or pa.state_key not in ck_a or pb.state_key not in ck_b:
+        raise CheckpointError(
+            f"{src_a} holds {model_keys(ck_a)} (policy reads {pa.obs_groups}), {src_b} {model_keys(ck_b)} "
+            f"(policy reads {pb.obs_groups}): not one policy lineage"
+        )
+    return [(pa.state_key, pb.state_key)]
+
+
 def average(cfg: AverageCfg) -> Path:
     """Write the interpolated checkpoint into ``cfg.out``; returns the model file."""
     if not 0.0 <= cfg.alpha <= 1.0:
@@ -92,14 +112,14 @@ def average(cfg: AverageCfg) -> Path:
         raise CheckpointError(
             f"{src_a} and {src_b}: different observation layouts (task.observations of their configs)"
         )
-    if model_keys(ck_a) != model_keys(ck_b):
-        raise CheckpointError(f"{src_a} holds {model_keys(ck_a)}, {src_b} {model_keys(ck_b)}: not the same kind of run")
+    pairs = _network_pairs(src_a, ck_a, src_b, ck_b)
     out = Path(cfg.out)
     if out.is_dir() and any(out.glob("model_*.pt")) and not cfg.force:
         raise FileExistsError(f"{out} already holds a model: pass force=true to replace it")
-    mixed = {k: v for k, v in ck_a.items() if not k.startswith("optimizer")}
-    for key in model_keys(ck_a):
-        mixed[key] = average_states(ck_a[key], ck_b[key], cfg.alpha, f"{key} of {src_a.name} / {src_b.name}")
+    dropped = set(model_keys(ck_a)) - {ka for ka, _ in pairs}
+    mixed = {k: v for k, v in ck_a.items() if not k.startswith("optimizer") and k not in dropped}
+    for ka, kb in pairs:
+        mixed[ka] = average_states(ck_a[ka], ck_b[kb], cfg.alpha, f"{ka} / {kb} of {src_a.name} / {src_b.name}")
     how = "(1 - alpha) a + alpha b; b's first layer re-expressed in a's normaliser (cat/learning/average.py)"
     note = {"a": str(src_a), "b": str(src_b), "alpha": cfg.alpha, "how": how}
     with tempfile.TemporaryDirectory(dir=out.parent if out.parent.is_dir() else None) as tmp:

@@ -84,7 +84,7 @@ def _observations(config: Path) -> dict:
     return (raw.get("task") or {}).get("observations") or {}
 
 
-def _network_pairs(src_a: Path, ck_a: dict, src_b: Path, ck_b: dict) -> list[tuple[str, str]]:
+def network_pairs(src_a: Path, ck_a: dict, src_b: Path, ck_b: dict) -> list[tuple[str, str]]:
     """Which network of ``a`` is mixed with which of ``b``: all of them for runs of one kind, else the deployable
     networks (``policy_model``), which must read the same observation groups."""
     if model_keys(ck_a) == model_keys(ck_b):
@@ -112,7 +112,7 @@ def average(cfg: AverageCfg) -> Path:
         raise CheckpointError(
             f"{src_a} and {src_b}: different observation layouts (task.observations of their configs)"
         )
-    pairs = _network_pairs(src_a, ck_a, src_b, ck_b)
+    pairs = network_pairs(src_a, ck_a, src_b, ck_b)
     out = Path(cfg.out)
     if out.is_dir() and any(out.glob("model_*.pt")) and not cfg.force:
         raise FileExistsError(f"{out} already holds a model: pass force=true to replace it")

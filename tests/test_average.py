@@ -105,4 +105,14 @@ def test_a_ppo_fine_tune_and_its_distilled_parent_mix_their_policies(tmp_path, c
     assert all(torch.equal(back["actor_state_dict"][k], actor[k]) for k in actor)
     voxel = REPO / "checkpoints/table3/voxel/seed0/model_610.pt"  # a PPO run reading another layout
     assert mod.main([f"a={parent}", f"b={voxel}", f"out={tmp_path / 'bad'}"]) == 2
+    assert "different observation layouts" in caplog.text
+    # the same layout, but a PPO actor that reads other groups than the student: not one policy lineage
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / tuned.name).symlink_to(tuned)
+    text = (tuned.parent / "config.yaml").read_text()
+    assert "    actor:\n    - student_proprio\n    - student\n" in text
+    (other / "config.yaml").write_text(text.replace("    actor:\n    - student_proprio\n", "    actor:\n", 1))
+    assert mod.main([f"a={parent}", f"b={other / tuned.name}", f"out={tmp_path / 'bad'}"]) == 2
+    assert "not one policy lineage" in caplog.text
     assert not (tmp_path / "bad").exists()

@@ -98,14 +98,22 @@ def load_specialists(checkpoints: list[str]) -> list[Specialist]:
     return out
 
 
-def check_teachers(specialists: list[Specialist], cfg: TrainCfg, group_names: list[str]) -> None:
-    """Every scene group of the env has a teacher, and each teacher's actor layout is the env's teacher groups."""
+def check_teachers(
+    specialists: list[Specialist], cfg: TrainCfg, group_names: list[str], every_group: bool = True
+) -> None:
+    """Every scene group of the env has a teacher (``every_group``; else at least one has: a PPO run rehearsing
+    some groups' teachers), and each teacher's actor layout is the env's teacher groups."""
     own = {g for s in specialists for g in s.groups}
-    for g in group_names:
-        if g not in own:
-            raise TeacherError(
-                f"scene group {g!r} has no teacher; teachers cover: {', '.join(sorted(own)) or 'nothing'}"
-            )
+    missing = [g for g in group_names if g not in own]
+    if missing and not every_group and len(missing) == len(group_names):
+        raise TeacherError(
+            f"no scene group of the env ({', '.join(group_names)}) has a teacher; teachers cover: "
+            f"{', '.join(sorted(own)) or 'nothing'}"
+        )
+    if missing and every_group:
+        raise TeacherError(
+            f"scene group {missing[0]!r} has no teacher; teachers cover: {', '.join(sorted(own)) or 'nothing'}"
+        )
     want = groups_layout(cfg.task, list(cfg.algo.distill.teacher_groups))
     for s in specialists:
         have = groups_layout(s.run.task, list(s.run.algo.obs_groups["actor"]))
@@ -159,30 +167,33 @@ class MultiTeacher(nn.Module):
                 if g in self.group_names:
                     route[self.group_names.index(g)] = k
         self.register_buffer("route", route, persistent=False)
+        self.output_dim = output_dim
         self.checkpoints = [s.checkpoint for s in specialists]
         if action_clip is not None and action_clip <= 0:
             raise ValueError(f"action_clip must be positive, got {action_clip}")
         self.action_clip = action_clip
 
-    def forward(self, obs: TensorDict, **unused) -> torch.Tensor:
+    def label(self, obs: TensorDict) -> tuple[torch.Tensor, torch.Tensor]:
+        """Each env's specialist action (clipped) and whether its scene group has a specialist (zeros where not)."""
         group = obs[self.route_group][:, 0].round().long()
         inside = (group >= 0) & (group < len(self.route))
         teacher = torch.where(inside, self.route[group.clamp(0, len(self.route) - 1)], -1)
-        out = None
+        out = torch.zeros(group.shape[0], self.output_dim, device=group.device)
         for k, actor in enumerate(self.teachers):
             mask = teacher == k
-            if not mask.any():
-                continue
-            actions = actor(obs[mask])
-            if out is None:
-                out = torch.zeros(group.shape[0], actions.shape[-1], dtype=actions.dtype, device=actions.device)
-            out[mask] = actions
-        if out is None or bool((teacher < 0).any()):
-            bad = sorted(set(group[teacher < 0].tolist()))
-            names = [self.group_names[b] if 0 <= b < len(self.group_names) else str(b) for b in bad]
-            raise TeacherError(f"envs of scene group(s) {names} have no teacher")
+            if mask.any():
+                out[mask] = actor(obs[mask]).to(out.dtype)
         if self.action_clip is not None:  # the label is what the env executes (it clips every action)
             out = out.clamp(-self.action_clip, self.action_clip)
+        return out, teacher >= 0
+
+    def forward(self, obs: TensorDict, **unused) -> torch.Tensor:
+        out, labelled = self.label(obs)
+        if not bool(labelled.all()):
+            group = obs[self.route_group][:, 0].round().long()
+            bad = sorted(set(group[~labelled].tolist()))
+            names = [self.group_names[b] if 0 <= b < len(self.group_names) else str(b) for b in bad]
+            raise TeacherError(f"envs of scene group(s) {names} have no teacher")
         return out
 
     # rsl_rl's recurrent-model interface (the specialists are MLPs: nothing to carry)

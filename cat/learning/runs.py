@@ -42,10 +42,11 @@ from cat.learning.finetune import (
 )
 from cat.learning.layout_init import init_from_prior
 from cat.learning.precision import check_mixed_precision
+from cat.learning.rehearsal import rehearsal_cfg
 from cat.learning.rerun_writer import prune_metrics
 from cat.learning.runners import BudgetReached, CatDistillationRunner, CatOnPolicyRunner
 from cat.learning.warm_start import adapt_to_new_inputs
-from cat.run.config import ALGOS, TrainCfg, check_obs_groups, runner_cfg, student_model_cfg
+from cat.run.config import ALGOS, DistillCfg, TrainCfg, check_obs_groups, runner_cfg, student_model_cfg
 from cat.run.config_file import load_run_config, resume_config, save_config  # noqa: F401  (re-exported)
 from cat.run.policy import quiet_constructor
 
@@ -147,29 +148,29 @@ def validate_train_cfg(cfg: TrainCfg) -> None:
     check_obs_groups(cfg.algo.obs_groups, env_groups)  # names, before any env is built
     if cfg.algo.name not in ALGOS:
         raise ValueError(f"algo.name={cfg.algo.name!r}; valid: {', '.join(ALGOS)}")
+    rehearses = cfg.algo.name == "ppo" and cfg.algo.rehearsal.learning_rate > 0
+    if cfg.algo.name == "distill" or rehearses:
+        _check_teacher_groups(cfg.algo.distill, env_groups, student=not rehearses)
+    if rehearses:
+        r = cfg.algo.rehearsal
+        if not cfg.teachers:
+            raise ValueError("algo.rehearsal.learning_rate > 0 needs teachers=[<specialist checkpoint>,...]")
+        for key, value in (("num_learning_epochs", r.num_learning_epochs), ("num_mini_batches", r.num_mini_batches)):
+            if value < 1:
+                raise ValueError(f"algo.rehearsal.{key}={value}: must be >= 1")
+    elif cfg.algo.rehearsal.learning_rate < 0:
+        raise ValueError(f"algo.rehearsal.learning_rate={cfg.algo.rehearsal.learning_rate}: must be >= 0 (0 = off)")
     if cfg.algo.name == "distill":
         d = cfg.algo.distill
         student_model_cfg(d)  # checks algo.distill.student
-        for key, groups in (("student_groups", d.student_groups), ("teacher_groups", d.teacher_groups)):
-            for g in groups or [None]:
-                if g not in env_groups:
-                    raise ValueError(
-                        f"algo.distill.{key} names observation group {g!r} that the env does not build; "
-                        f"groups (task.observations): {', '.join(env_groups)}"
-                    )
-        if d.route_group not in env_groups or env_groups[d.route_group] != ["scene_group"]:
-            raise ValueError(
-                f"algo.distill.route_group={d.route_group!r} must be an observation group of exactly the "
-                "scene_group term (task.observations)"
-            )
         if not 0.0 <= d.teacher_drive_prob <= 1.0:
             raise ValueError(f"algo.distill.teacher_drive_prob must be in [0, 1], got {d.teacher_drive_prob}")
         if not cfg.teachers:
             raise ValueError("algo=distill needs teachers=[<specialist checkpoint>,...]")
         if cfg.algo.symmetry_augment or cfg.algo.mirror_loss_coeff > 0:
             raise ValueError("rsl_rl's Distillation rejects symmetry: set algo.symmetry_augment=false")
-    elif cfg.teachers:
-        raise ValueError("teachers= is for algo=distill")
+    elif cfg.teachers and not rehearses:
+        raise ValueError("teachers= is for algo=distill, or PPO with algo.rehearsal.learning_rate > 0")
     check_backend(cfg.sim.backend)
     # a resumed run's init= is history (its weights are in the checkpoint): only the file to read is checked
     path = cfg.resume or cfg.init
@@ -193,6 +194,23 @@ def validate_train_cfg(cfg: TrainCfg) -> None:
             check_actor_matches_student(cfg, load_run_config(path), str(path))
 
 
+def _check_teacher_groups(d: DistillCfg, env_groups: dict[str, list[str]], student: bool) -> None:
+    """The observation groups the teachers (and a student) read, and the route group, are built by the env."""
+    keys = (("student_groups", d.student_groups),) if student else ()
+    for key, groups in (*keys, ("teacher_groups", d.teacher_groups)):
+        for g in groups or [None]:
+            if g not in env_groups:
+                raise ValueError(
+                    f"algo.distill.{key} names observation group {g!r} that the env does not build; "
+                    f"groups (task.observations): {', '.join(env_groups)}"
+                )
+    if d.route_group not in env_groups or env_groups[d.route_group] != ["scene_group"]:
+        raise ValueError(
+            f"algo.distill.route_group={d.route_group!r} must be an observation group of exactly the "
+            "scene_group term (task.observations)"
+        )
+
+
 def make_runner(cfg: TrainCfg, env: TraversalEnv, log_dir: str | None) -> OnPolicyRunner:
     """rsl_rl's PPO runner, or for ``algo=distill`` its ``DistillationRunner`` with the multi-teacher loaded, as
     ``cat.learning.runners`` extends them: checkpoints carry ``_training_state`` and an env snapshot."""
@@ -202,7 +220,7 @@ def make_runner(cfg: TrainCfg, env: TraversalEnv, log_dir: str | None) -> OnPoli
         runner = CatDistillationRunner(env, train_cfg, log_dir, str(env.device), state=state)
         runner.alg.teacher_loaded = True  # MultiTeacher loaded and checked every specialist on construction
         return runner
-    train_cfg = runner_cfg(cfg.algo, env.obs_groups)
+    train_cfg = runner_cfg(cfg.algo, env.obs_groups, rehearsal_cfg(cfg, env.scene_group_names))
     return CatOnPolicyRunner(env, train_cfg, log_dir=log_dir, device=str(env.device), state=state)
 
 
@@ -273,8 +291,9 @@ def train(cfg: TrainCfg) -> Path:
     set_torch_threads(cfg.torch_threads)
     check_mixed_precision(cfg.algo.mixed_precision, cfg.sim.device)
     env = make_env(cfg)  # before any folder exists: a bad scene or model leaves nothing behind
-    if cfg.algo.name == "distill":
-        check_teachers(load_specialists(list(cfg.teachers)), cfg, env.scene_group_names)
+    if cfg.teachers:  # distillation, or PPO that rehearses the teachers of some scene groups
+        every = cfg.algo.name == "distill"
+        check_teachers(load_specialists(list(cfg.teachers)), cfg, env.scene_group_names, every_group=every)
     run_dir = Path(cfg.resume).parent if cfg.resume else new_run_dir(cfg)
     try:
         return _train_in(cfg, env, run_dir)

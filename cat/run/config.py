@@ -62,12 +62,27 @@ class DistillCfg:
 
 
 @dataclass
+class RehearsalCfg:
+    """PPO that rehearses its teachers (``learning_rate`` > 0 with ``teachers=[...]``; cat/learning/rehearsal.py):
+    after each PPO update the actor imitates, on the rollout's own states, the specialist of each scene group that
+    has one (DAgger's labels, read from ``algo.distill.teacher_groups`` and routed by ``algo.distill.route_group``),
+    with its own Adam; groups without a teacher learn from PPO alone. A fine-tune on new scenes keeps the skills
+    its teachers hold while PPO works on what they cannot teach (issue 28)."""
+
+    learning_rate: float = 0.0  # the imitation phase's Adam rate; 0: off (plain PPO)
+    num_learning_epochs: int = 1  # passes over the rollout's labelled states per PPO update
+    num_mini_batches: int = 4
+    max_grad_norm: float = 1.0
+
+
+@dataclass
 class AlgoCfg:
     """PPO (rsl_rl) settings; defaults follow the authors' release where known. ``name=distill`` trains a
     student by DAgger instead (``distill``; PPO's policy settings then describe nothing)."""
 
     name: str = "ppo"  # ppo | distill
     distill: DistillCfg = field(default_factory=DistillCfg)
+    rehearsal: RehearsalCfg = field(default_factory=RehearsalCfg)  # PPO only: imitate teachers beside PPO
     num_steps_per_env: int = 24
     learning_rate: float = 3.0e-4
     gamma: float = 0.97
@@ -154,9 +169,12 @@ def check_obs_groups(obs_groups: dict[str, list[str]], env_groups: Iterable[str]
                 )
 
 
-def runner_cfg(algo: AlgoCfg, env_groups: Iterable[str] | None = None) -> dict[str, Any]:
+def runner_cfg(
+    algo: AlgoCfg, env_groups: Iterable[str] | None = None, rehearsal: dict[str, Any] | None = None
+) -> dict[str, Any]:
     """rsl_rl 5.5 ``OnPolicyRunner`` config dict; with ``env_groups`` the observation sets are checked against
-    the groups the env builds."""
+    the groups the env builds; ``rehearsal`` (the teachers' files and the env's scene groups,
+    ``cat.learning.rehearsal.rehearsal_cfg``) makes the algorithm ``RehearsalPPO``."""
     obs_groups = {k: list(v) for k, v in algo.obs_groups.items()}
     if env_groups is not None:
         check_obs_groups(obs_groups, env_groups)
@@ -182,6 +200,7 @@ def runner_cfg(algo: AlgoCfg, env_groups: Iterable[str] | None = None) -> dict[s
             "symmetry_cfg": _symmetry_cfg(algo),
             "use_mixed_precision": algo.mixed_precision,
             **_critic_warmup(algo),
+            **({"class_name": "cat.learning.rehearsal:RehearsalPPO", "rehearsal": rehearsal} if rehearsal else {}),
         },
         "actor": {
             "class_name": "MLPModel",

@@ -34,6 +34,12 @@ class ShipCfg:
     weights_only: bool = False
 
 
+def is_optimizer_state(key: str) -> bool:
+    """A checkpoint entry that holds an optimiser's state: rsl_rl's ``optimizer_state_dict`` (and its RND one's),
+    ``cat.learning.rehearsal``'s ``rehearsal_optimizer_state_dict``."""
+    return key.startswith("optimizer") or key.endswith("optimizer_state_dict")
+
+
 def compact_optimizer_state(ckpt: dict) -> dict:
     """``ckpt`` with every floating-point tensor of its optimiser state(s) in bfloat16 (``step`` counts kept)."""
 
@@ -46,7 +52,7 @@ def compact_optimizer_state(ckpt: dict) -> dict:
             return [shrink(v) for v in value]
         return value
 
-    return {k: shrink(v) if k.startswith("optimizer") else v for k, v in ckpt.items()}
+    return {k: shrink(v) if is_optimizer_state(k) else v for k, v in ckpt.items()}
 
 
 def ship(cfg: ShipCfg) -> list[Path]:
@@ -65,7 +71,7 @@ def ship(cfg: ShipCfg) -> list[Path]:
     with tempfile.TemporaryDirectory(dir=out.parent if out.parent.is_dir() else None) as tmp:
         stage = Path(tmp)
         if cfg.weights_only:
-            ckpt = {k: v for k, v in ckpt.items() if not k.startswith("optimizer")}
+            ckpt = {k: v for k, v in ckpt.items() if not is_optimizer_state(k)}
         torch.save(compact_optimizer_state(ckpt), stage / src.name)
         size_mb = (stage / src.name).stat().st_size / 2**20
         if size_mb > cfg.max_mb:

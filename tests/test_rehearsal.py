@@ -109,3 +109,29 @@ def test_bad_rehearsal_settings_are_refused_before_any_env_is_built(teacher, tmp
     with pytest.raises(TeacherError, match="no scene group of the env \\(side-pass\\) has a teacher"):
         train(cfg)
     assert not (tmp_path / "none").exists()
+
+
+def test_a_rank_without_labelled_states_still_takes_every_averaged_step(teacher, monkeypatch):
+    """Multi-GPU: each rank's gradients are all-reduced before every imitation step, so every rank must take the
+    same number of steps; one whose rollout holds no taught scene takes them on empty mini-batches (zero
+    gradient, finite loss). Exercised on a one-process gloo group."""
+    import torch.distributed as dist
+
+    cfg = _cfg([teacher])
+    env = make_env(cfg)
+    alg = make_runner(cfg, env, None).alg
+    obs, labels = alg._labelled_states()
+    empty_obs, empty_labels = obs[:0], labels[:0]
+    before = [p.detach().clone() for p in alg.actor.parameters()]
+    dist.init_process_group("gloo", init_method="tcp://127.0.0.1:29517", rank=0, world_size=1)
+    try:
+        monkeypatch.setattr(alg, "is_multi_gpu", True)
+        steps, step = [], alg.rehearsal_optimizer.step
+        monkeypatch.setattr(alg.rehearsal_optimizer, "step", lambda: steps.append(1) or step())  # counted, then run
+        assert alg._rehearse(empty_obs, empty_labels) == 0.0
+    finally:
+        dist.destroy_process_group()
+    assert len(steps) == 4 * 2  # num_learning_epochs x num_mini_batches, as every other rank
+    assert all(torch.equal(a, b) for a, b in zip(before, alg.actor.parameters(), strict=True))
+    grads = [p.grad for p in alg.actor.parameters() if p.grad is not None]
+    assert grads and all(not g.any() for g in grads)

@@ -12,12 +12,12 @@ update stays rsl_rl's, unchanged, and the imitation never enters its ratio or KL
 from __future__ import annotations
 
 import logging
-import math
 import os
 from typing import Any
 
 import torch
 import torch.nn as nn
+from rsl_rl.utils import reduce_gradients_in_buckets
 from tensordict import TensorDict
 
 from cat.learning.distill import MultiTeacher
@@ -76,34 +76,36 @@ class RehearsalPPO(CriticWarmupPPO):
         learns = self.iteration >= self.warmup_iterations  # read before the warm-up counts this update
         states = self._labelled_states() if learns else None  # before PPO's update recycles the storage
         out = super().update()
-        if states is not None:
+        # every rank of a multi-GPU run takes the same steps (their gradients are averaged), labelled states or not
+        if states is not None and (len(states[1]) > 0 or self.is_multi_gpu):
             out["rehearsal"] = self._rehearse(*states)
         return out
 
     @torch.no_grad()
-    def _labelled_states(self) -> tuple[TensorDict, torch.Tensor] | None:
+    def _labelled_states(self) -> tuple[TensorDict, torch.Tensor]:
         """The rollout's states whose scene group has a teacher (the actor's groups only) and their labels."""
         obs = self.storage.observations.flatten(0, 1)
         labels, labelled = self.teacher.label(obs)
         index = labelled.nonzero().squeeze(1)
-        if index.numel() == 0:
-            return None
         return obs.select(*self.actor.obs_groups)[index], labels[index]
 
     def _rehearse(self, obs: TensorDict, labels: torch.Tensor) -> float:
-        """Mini-batch MSE steps of the actor's mean toward the labels; returns the mean loss."""
-        n = labels.shape[0]
-        size = math.ceil(n / self.rehearsal_batches)
-        total, steps = 0.0, 0
+        """``num_learning_epochs`` x ``num_mini_batches`` MSE steps of the actor's mean toward the labels (a
+        mini-batch may be empty on a rank with few labelled states: its gradient is zero, and the ranks' gradients
+        are averaged before each step as PPO's are); returns the mean loss."""
+        n, params = labels.shape[0], list(self.actor.parameters())
+        total = 0.0
         for _ in range(self.rehearsal_epochs):
-            for chunk in torch.randperm(n, device=labels.device).split(size):
-                loss = (self.actor(obs[chunk]) - labels[chunk]).pow(2).mean()
+            for chunk in torch.randperm(n, device=labels.device).tensor_split(self.rehearsal_batches):
+                loss = (self.actor(obs[chunk]) - labels[chunk]).pow(2).sum() / max(chunk.numel() * labels.shape[1], 1)
                 self.rehearsal_optimizer.zero_grad()
                 loss.backward()
-                nn.utils.clip_grad_norm_(self.actor.parameters(), self.rehearsal_grad_norm)
+                if self.is_multi_gpu:
+                    reduce_gradients_in_buckets(params, self.gpu_world_size, self.grad_reduce_bucket_mb)
+                nn.utils.clip_grad_norm_(params, self.rehearsal_grad_norm)
                 self.rehearsal_optimizer.step()
-                total, steps = total + loss.item(), steps + 1
-        return total / max(steps, 1)
+                total += loss.item()
+        return total / (self.rehearsal_epochs * self.rehearsal_batches)
 
     def save(self) -> dict:
         return {**super().save(), "rehearsal_optimizer_state_dict": self.rehearsal_optimizer.state_dict()}

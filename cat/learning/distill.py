@@ -168,6 +168,7 @@ class MultiTeacher(nn.Module):
                     route[self.group_names.index(g)] = k
         self.register_buffer("route", route, persistent=False)
         self.output_dim = output_dim
+        self.read_groups = [route_group, *obs_groups[obs_set]]  # what label() indexes per teacher (not the rest)
         self.checkpoints = [s.checkpoint for s in specialists]
         if action_clip is not None and action_clip <= 0:
             raise ValueError(f"action_clip must be positive, got {action_clip}")
@@ -175,6 +176,7 @@ class MultiTeacher(nn.Module):
 
     def label(self, obs: TensorDict) -> tuple[torch.Tensor, torch.Tensor]:
         """Each env's specialist action (clipped) and whether its scene group has a specialist (zeros where not)."""
+        obs = obs.select(*self.read_groups)  # a view: the per-teacher masks then copy only the groups teachers read
         group = obs[self.route_group][:, 0].round().long()
         inside = (group >= 0) & (group < len(self.route))
         teacher = torch.where(inside, self.route[group.clamp(0, len(self.route) - 1)], -1)

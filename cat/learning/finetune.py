@@ -96,13 +96,18 @@ class CriticWarmupPPO(PPO):
                 self.warmup_rate,
             )
 
+    @property
+    def actor_frozen(self) -> bool:
+        """Whether the next update is a warm-up one (the critic alone)."""
+        return self.iteration < self.warmup_iterations
+
     def _set_rate(self, lr: float) -> None:
         self.learning_rate = lr
         for group in self.optimizer.param_groups:
             group["lr"] = lr
 
     def update(self) -> dict[str, float]:
-        warm = self.iteration < self.warmup_iterations
+        warm = self.actor_frozen
         self.iteration += 1
         if not warm:
             return super().update()

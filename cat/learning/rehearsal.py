@@ -73,7 +73,7 @@ class RehearsalPPO(CriticWarmupPPO):
         log.info("rehearsal: the actor imitates %d teacher(s) on scene groups %s", len(self.teacher.teachers), taught)
 
     def update(self) -> dict[str, float]:
-        learns = self.iteration >= self.warmup_iterations  # read before the warm-up counts this update
+        learns = not self.actor_frozen  # read before the warm-up counts this update
         states = self._labelled_states() if learns else None  # before PPO's update recycles the storage
         out = super().update()
         # every rank of a multi-GPU run takes the same steps (their gradients are averaged), labelled states or not

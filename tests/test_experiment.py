@@ -365,3 +365,21 @@ def test_field_contact_defaults_never_restart_a_physical_run(tmp_path):
     status = {k: plan.status(u) for k, u in plan.units.items()}
     assert status == {"prior@0": "done", "next@0": "done", "old_field@0": "done", "new_field@0": "stale"}
     assert plan.state["units"]["prior@0"]["hash"] == plan.units["prior@0"].hash  # re-keyed
+
+
+def test_every_hashed_train_key_is_recorded():
+    """A key added to (or removed from) TrainCfg changes every run hash, so every unfinished run would restart as
+    "changed" and finished ones be moved aside (it happened: algo.rehearsal). A new key must be declared in
+    NEUTRAL_DEFAULTS at the value that reproduces what earlier runs did, or recorded here as a real change."""
+    from cat.experiment.plan import NEUTRAL_DEFAULTS, VOLATILE, train_keys
+
+    lines = (REPO / "tests/data/hashed_train_keys.txt").read_text().splitlines()
+    recorded = {line for line in lines if not line.startswith("#")}
+    hashed = {
+        ".".join(k)
+        for k in train_keys()
+        if k[0] not in VOLATILE and not any(k[: len(n)] == n for n in NEUTRAL_DEFAULTS)
+    }
+    assert not hashed - recorded, f"TrainCfg keys not in NEUTRAL_DEFAULTS nor recorded: {sorted(hashed - recorded)}"
+    assert not recorded - hashed, f"recorded keys TrainCfg no longer has: {sorted(recorded - hashed)}"
+    assert ("algo", "rehearsal") in NEUTRAL_DEFAULTS  # rehearsal off is plain PPO, what runs before it did

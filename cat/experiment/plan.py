@@ -15,10 +15,12 @@ change of the field-contact defaults never restarts a run it does not touch.
 from __future__ import annotations
 
 import copy
+import dataclasses
 import hashlib
 import json
 import math
 import re
+import typing
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -35,6 +37,12 @@ NEUTRAL_DEFAULTS = {
     ("task", "episodes", "goal_stand_radius"): 0.0,
     ("algo", "max_noise_std"): 0.0,
     ("task", "curriculum", "group_weights"): {},
+    ("algo", "rehearsal"): {  # off: plain PPO
+        "learning_rate": 0.0,
+        "num_learning_epochs": 1,
+        "num_mini_batches": 4,
+        "max_grad_norm": 1.0,
+    },
 }
 """Keys added after runs were hashed, with the value that reproduces what those runs did: left out of the hash at
 that value, so adding the key does not make every unfinished run "changed" (a key added at its old behaviour)."""
@@ -56,6 +64,21 @@ def latest_checkpoint(run_dir: Path) -> tuple[int, Path] | None:
         if m:
             found.append((int(m.group(1)), p))
     return max(found) if found else None
+
+
+def train_keys(cls=None, prefix: tuple[str, ...] = ()) -> list[tuple[str, ...]]:
+    """Every leaf key of ``TrainCfg`` as a path (a dict- or list-valued key is one leaf): what a run hash can read.
+    tests/data/hashed_train_keys.txt records them, so that a key added later must be declared in
+    ``NEUTRAL_DEFAULTS`` (or as a change of what runs learn) before every unfinished run reads as changed."""
+    from cat.run.config import TrainCfg
+
+    cls = cls or TrainCfg
+    hints = typing.get_type_hints(cls)
+    out: list[tuple[str, ...]] = []
+    for f in dataclasses.fields(cls):
+        sub = hints[f.name]
+        out += train_keys(sub, (*prefix, f.name)) if dataclasses.is_dataclass(sub) else [(*prefix, f.name)]
+    return out
 
 
 def _comparable(cfg) -> dict:

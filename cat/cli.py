@@ -170,7 +170,8 @@ def run(script: Script, argv: list[str]) -> int:
             if flags["sweep_dir"]:
                 hydra_args.append(f"hydra.sweep.dir={flags['sweep_dir']}")
             full = [[*job, f"{script.run_dir_key}={flags['sweep_dir']}/{k}"] for k, job in enumerate(jobs)]
-            return max(launch(script_path(script.job), full if flags["sweep_dir"] else jobs, hydra_args, script.name))
+            results = launch(script_path(script.job), full if flags["sweep_dir"] else jobs, hydra_args, script.name)
+            return max(r.code for r in results)
         if script.uses_launcher:
             return max(script.job(cfg, flags["launcher"]) for cfg in configs)
         code = 0

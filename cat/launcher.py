@@ -13,8 +13,10 @@ import importlib.util
 import inspect
 import logging
 import sys
+import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NamedTuple
 
 from hydra.core.config_store import ConfigStore
 from hydra.core.global_hydra import GlobalHydra
@@ -54,12 +56,21 @@ class ScriptJob:
     path: str
     jobs: list[list[str]]
 
-    def __call__(self, cfg) -> int:
+    def __call__(self, cfg) -> JobResult:
         from hydra.core.hydra_config import HydraConfig
 
         _ensure_logging()
         k = int(HydraConfig.get().job.num)
-        return run_script_job(self.path, self.jobs[k])
+        t0 = time.monotonic()
+        code = run_script_job(self.path, self.jobs[k])
+        return JobResult(int(code or 0), (time.monotonic() - t0) / 60.0)
+
+
+class JobResult(NamedTuple):
+    """A launched job's exit code and its own wall-clock minutes (None: it raised, the launcher did not time it)."""
+
+    code: int
+    minutes: float | None = None
 
 
 def run_script_job(path: str | Path, overrides: list[str]) -> int:
@@ -127,10 +138,10 @@ def _compose(hydra, hydra_args: list[str]):
         raise LauncherError(f"bad launcher override: {str(err).splitlines()[0]}{detail}") from None
 
 
-def launch(path: str | Path, jobs: list[list[str]], hydra_args: list[str], name: str | None = None) -> list[int]:
+def launch(path: str | Path, jobs: list[list[str]], hydra_args: list[str], name: str | None = None) -> list[JobResult]:
     """Run ``jobs`` (override lists of the script at ``path``) through the launcher ``hydra_args`` select
     (``hydra/launcher=joblib``, ``hydra.launcher.n_jobs=2``, ``hydra.sweep.dir=...``); returns each job's exit
-    code in order (1 for a job that raised)."""
+    code and minutes in order (code 1 for a job that raised)."""
     from hydra.core.hydra_config import HydraConfig
     from hydra.core.plugins import Plugins
     from hydra.core.utils import JobStatus
@@ -155,14 +166,14 @@ def launch(path: str | Path, jobs: list[list[str]], hydra_args: list[str], name:
         returns = launcher.launch(shown, initial_job_idx=0)
     finally:
         GlobalHydra.instance().clear()
-    codes = []
+    results = []
     for k, ret in enumerate(returns):
         if ret.status == JobStatus.COMPLETED:
-            codes.append(int(ret.return_value or 0))
+            results.append(JobResult(*ret.return_value))
         else:
             log.error("job %d (%s) failed: %s", k, " ".join(jobs[k]), ret._return_value)
-            codes.append(1)
-    return codes
+            results.append(JobResult(1))
+    return results
 
 
 def _shown(override: str) -> str:

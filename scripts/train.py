@@ -24,7 +24,8 @@ def _load(overrides: list[str]):
 
 
 def _job(cfg) -> int:
-    print(f"run folder: {train(cfg)}")
+    run_dir = train(cfg)
+    print(f"run folder: {run_dir}" if run_dir else "deadline passed: nothing run")
     return 0
 
 

@@ -1,12 +1,13 @@
-"""A sitting's budget (``max_minutes=``): a stage's runs go in waves as wide as the launcher runs at once on this
-machine (the sequential launcher: one; joblib: ``n_jobs``), each wave given what the sitting has left when it
-starts, so one sitting of experiment=table1 (ten runs in one stage) stops on time instead of giving every run the
-whole budget."""
+"""A sitting's budget (``max_minutes=``): every run of a stage is launched at once with the sitting's end as its
+``deadline``, so a run the launcher queues (the sequential launcher runs one at a time, joblib ``n_jobs``) gets only
+what is left, one that starts after the end runs nothing, and a core freed early takes the next run at once."""
 
 from __future__ import annotations
 
+import json
 import logging
 import re
+import time
 from pathlib import Path
 
 import yaml
@@ -17,42 +18,61 @@ REPO = Path(__file__).resolve().parents[1]
 COMMON = ["sim=mujoco", "num_envs=4", "algo.num_steps_per_env=4", "algo.save_interval=1"]
 
 
-def _given(caplog, by_seed: bool = False) -> dict[str, float]:
-    """The sitting budget each stage-0 run was launched with, by cell (or ``cell@seed``), from the runner's log."""
+def _given(caplog) -> dict[str, float]:
+    """The deadline each stage-0 run was launched with, by ``cell@seed``, from the runner's log."""
     return {
-        (m.group(1) if by_seed else m.group(1).split("@")[0]): float(m.group(2))
+        m.group(1): float(m.group(2))
         for r in caplog.records
-        if (m := re.match(r"stage 0: (\w+@\d): .* max_minutes=([\d.]+)", r.getMessage()))
+        if (m := re.match(r"stage 0: (\w+@\d): .* deadline=([\d.]+)", r.getMessage()))
     }
 
 
-def test_each_sequential_run_gets_what_the_sitting_has_left(tmp_path, caplog):
+def _run(tmp_path, caplog, cells: dict, extra: list[str]) -> int:
     exp = tmp_path / "sit.yaml"
-    cells = {"a": {"task": "flat", "iterations": 1}, "b": {"task": "flat", "iterations": 1, "seeds": [1]}}
     exp.write_text(yaml.safe_dump({"common": COMMON, "cells": cells}))
     mod = load_script(REPO / "scripts" / "experiment.py")
     with caplog.at_level(logging.INFO):
-        code = mod.main([f"experiment={exp}", f"root={tmp_path / 'exps'}", "max_minutes=30"])
-    assert code == 0
+        return mod.main([f"experiment={exp}", f"root={tmp_path / 'exps'}", "max_minutes=30", *extra])
+
+
+def test_sequential_runs_share_the_sittings_end(tmp_path, caplog):
+    t0 = time.time()
+    cells = {"a": {"task": "flat", "iterations": 1}, "b": {"task": "flat", "iterations": 1, "seeds": [1]}}
+    assert _run(tmp_path, caplog, cells, []) == 0
     given = _given(caplog)
-    assert set(given) == {"a", "b"}
-    assert given["a"] <= 30 and given["b"] < given["a"]  # b started after a ran: less of the sitting was left
+    assert set(given) == {"a@0", "b@1"}
+    assert given["a@0"] == given["b@1"] and t0 + 29 * 60 < given["a@0"] <= time.time() + 30 * 60
     assert (tmp_path / "exps/sit/runs/a/seed0/model_0.pt").is_file()
     assert (tmp_path / "exps/sit/runs/b/seed1/model_0.pt").is_file()
+    state = json.loads((tmp_path / "exps/sit/state.json").read_text())["units"]
+    assert all(0 < state[u]["minutes"] < 5 for u in ("a@0", "b@1"))  # each run's own minutes
 
 
-def test_joblib_waves_of_n_jobs_each_get_what_is_left(tmp_path, caplog):
-    """Waves are seed-major: seed 0 of every cell before any seed 1 (a sitting cut short leaves a whole column)."""
-    exp = tmp_path / "wave.yaml"
+def test_joblib_gets_every_run_of_a_stage_at_once_seed_major(tmp_path, caplog):
+    """Three runs on n_jobs=2 are one launch (a core freed by a run that ends early takes the next at once), seed 0
+    of every cell first (a sitting cut short leaves a whole column)."""
     cells = {"a": {"task": "flat", "iterations": 1, "seeds": [0, 1]}, "b": {"task": "flat", "iterations": 1}}
-    exp.write_text(yaml.safe_dump({"common": COMMON, "cells": cells}))
-    mod = load_script(REPO / "scripts" / "experiment.py")
-    args = [f"experiment={exp}", f"root={tmp_path / 'exps'}", "max_minutes=30", "hydra/launcher=joblib"]
+    assert _run(tmp_path, caplog, cells, ["hydra/launcher=joblib", "hydra.launcher.n_jobs=2"]) == 0
+    given = _given(caplog)
+    assert list(given) == ["a@0", "b@0", "a@1"] and len(set(given.values())) == 1
+    assert any("launching 3 job(s)" in r.getMessage() for r in caplog.records)
+    assert all((tmp_path / f"exps/sit/runs/{u}/model_0.pt").is_file() for u in ("a/seed0", "a/seed1", "b/seed0"))
+
+
+def test_a_run_started_after_its_deadline_runs_nothing(tmp_path, caplog):
+    """What a queued job does when the sitting ended before its turn: no env, no folder, and resume= of a run keeps
+    no earlier sitting's deadline (it would stop a later resume at once)."""
+    from cat.learning.hydra_cfg import load_config
+    from cat.learning.runs import train
+    from cat.run.config_file import resume_config
+
+    cfg = load_config([*COMMON, "task=flat", "max_iterations=1", f"run_dir={tmp_path / 'late'}", "deadline=1000"])
     with caplog.at_level(logging.INFO):
-        code = mod.main([*args, "hydra.launcher.n_jobs=2"])
-    assert code == 0
-    given = _given(caplog, by_seed=True)
-    assert set(given) == {"a@0", "a@1", "b@0"}
-    assert given["a@0"] == given["b@0"] <= 30  # the first wave: seed 0 of both cells, launched together
-    assert given["a@1"] < given["a@0"]  # the second wave started after the first ran
-    assert all((tmp_path / f"exps/wave/runs/{u}/model_0.pt").is_file() for u in ("a/seed0", "a/seed1", "b/seed0"))
+        assert train(cfg) is None
+    assert "deadline passed before the run started" in caplog.text and not (tmp_path / "late").exists()
+    run = train(load_config([*COMMON, "task=flat", "max_iterations=1", f"run_dir={tmp_path / 'run'}"]))
+    config = (tmp_path / "run/config.yaml").read_text()
+    assert "\ndeadline: 0.0\n" in config
+    (tmp_path / "run/config.yaml").write_text(config.replace("\ndeadline: 0.0\n", "\ndeadline: 1000.0\n"))
+    assert resume_config(run / "model_0.pt", ["max_iterations=2"]).deadline == 0.0
+    assert resume_config(run / "model_0.pt", ["deadline=5"]).deadline == 5.0

@@ -30,7 +30,7 @@ from cat.experiment.spec import BIG_ITERATIONS, Cell, Experiment, ExperimentErro
 from cat.learning.hydra_cfg import load_config
 
 # keys that do not change what a run learns (or are the budget, handled apart)
-VOLATILE = ("run_dir", "run_root", "run_name", "max_minutes", "max_iterations", "verbose", "torch_threads")
+VOLATILE = ("run_dir", "run_root", "run_name", "max_minutes", "deadline", "max_iterations", "verbose", "torch_threads")
 VOLATILE += ("init", "resume", "teachers")
 NEUTRAL_DEFAULTS = {
     ("sim", "field_storage"): "float32",

@@ -5,7 +5,6 @@ nothing."""
 from __future__ import annotations
 
 import logging
-import os
 import shlex
 import shutil
 import time
@@ -120,7 +119,7 @@ class Runner:
     def _inputs_ready(self, unit: Unit) -> bool:
         return all(self._ref_ready(r) for r in unit.inputs.values())
 
-    def _job(self, unit: Unit, left: float | None) -> list[str]:
+    def _job(self, unit: Unit, deadline: float | None) -> list[str]:
         status = self.plan.status(unit)
         if status == "stale":
             aside = unit.run_dir.with_name(f"{unit.run_dir.name}.stale-{time.strftime('%Y%m%d-%H%M%S')}")
@@ -136,12 +135,11 @@ class Runner:
             _, at = self._latest(unit)
             iterations, leg = self.plan.leg(unit)
             overrides = self.plan.resume_overrides(unit, at, iterations, leg)
-        budget = [left] if left is not None else []
-        if unit.cell.minutes is not None:
-            budget.append(unit.cell.minutes - self.plan.minutes_used(unit))
         overrides += [f"torch_threads={self.cfg.torch_threads}"]
-        if budget:
-            overrides.append(f"max_minutes={max(min(budget), 0.01):.3f}")
+        if unit.cell.minutes is not None:  # the cell's own wall-clock budget, what earlier sittings left of it
+            overrides.append(f"max_minutes={max(unit.cell.minutes - self.plan.minutes_used(unit), 0.01):.3f}")
+        if deadline is not None:
+            overrides.append(f"deadline={deadline:.0f}")
         return overrides
 
     @staticmethod
@@ -150,58 +148,33 @@ class Runner:
 
         return latest_checkpoint(unit.run_dir)
 
-    def _hydra_arg(self, key: str) -> str | None:
-        """The last value given to hydra option ``key`` (``hydra/launcher``, ``hydra.launcher.n_jobs``), if any."""
-        given = [a.split("=", 1)[1] for a in self.hydra_args if a.split("=", 1)[0].lstrip("+") == key]
-        return given[-1] if given else None
-
-    def _width(self) -> int | None:
-        """How many of a stage's jobs run at once on this machine: 1 for hydra's ``basic`` launcher (the default),
-        ``n_jobs`` for ``joblib`` (all cores when unset or negative); None for launchers that start every job at
-        once (``submitit_*``, ``ray``: a cluster's width is not this machine's)."""
-        launcher = self._hydra_arg("hydra/launcher") or "basic"
-        if launcher == "basic":
-            return 1
-        if launcher != "joblib":
-            return None
-        n = int(self._hydra_arg("hydra.launcher.n_jobs") or -1)
-        return n if n > 0 else max(1, (os.cpu_count() or 1) + 1 + n)  # joblib: -1 = all cores, -2 = all but one
-
     def _train_stage(self, k: int, units: list[Unit], left: float | None) -> None:
-        """Launch a stage's runs. With a sitting budget and a launcher that runs ``w`` jobs at a time on this
-        machine (``basic``: 1, ``joblib``: ``n_jobs``), the runs go in waves of ``w``, each wave given what the
-        sitting has left when it starts (launched together, a later wave would get the whole budget again); runs
-        not reached are left for the next sitting."""
-        width = self._width()
-        if left is None or width is None or width >= len(units):
-            self._launch_units(k, units, left)
-            return
-        for n in range(0, len(units), width):
-            left = self.minutes_left()
-            if left is not None and left <= 0:
-                log.info("max_minutes=%g spent: %s left for the next sitting", self.cfg.max_minutes,
-                         ", ".join(u.key for u in units[n:]))  # fmt: skip
-                return
-            self._launch_units(k, units[n : n + width], left)
-
-    def _launch_units(self, k: int, units: list[Unit], left: float | None) -> None:
-        jobs = [self._job(u, left) for u in units]
+        """Launch a stage's runs together. With a sitting budget every job gets the sitting's end as its
+        ``deadline`` (Unix time): a job the launcher starts late (``basic`` runs one at a time, ``joblib``
+        ``n_jobs``) has only what is left, one that starts after it runs nothing, and a core freed by a run that
+        ends early takes the next run at once; runs not finished resume next sitting."""
+        deadline = None if left is None else time.time() + 60.0 * left
+        jobs = [self._job(u, deadline) for u in units]
         for unit, job in zip(units, jobs, strict=True):
             log.info("stage %d: %s: %s", k, unit.key, _cmd("train", job))
             entry = self.plan.state["units"].setdefault(unit.key, {})
             entry.update(hash=unit.hash, run_dir=str(unit.run_dir), cell=unit.cell.name, seed=unit.seed)
         self.plan.write_state()  # before launching: a sitting killed mid-stage still resumes its runs
+        before = [self._latest(u) for u in units]
         t0 = time.monotonic()
-        codes = launch(SCRIPTS / "train.py", jobs, self._hydra(f"stage{k}"), name=f"{self.exp.name}-stage{k}")
-        minutes = (time.monotonic() - t0) / 60.0
-        for unit, code in zip(units, codes, strict=True):
+        results = launch(SCRIPTS / "train.py", jobs, self._hydra(f"stage{k}"), name=f"{self.exp.name}-stage{k}")
+        stage_minutes = (time.monotonic() - t0) / 60.0
+        for unit, result, prior in zip(units, results, before, strict=True):
             entry = self.plan.state["units"][unit.key]
-            entry["minutes"] = entry.get("minutes", 0.0) + minutes
-            status = self.plan.status(unit) if code == 0 else "failed"
+            entry["minutes"] = entry.get("minutes", 0.0) + (stage_minutes if result.minutes is None else result.minutes)
+            status = self.plan.status(unit) if result.code == 0 else "failed"
             entry["status"] = status
             if status == "done":
                 entry["checkpoint"] = str(unit.checkpoint())
-            (self.failed if code else self.ran).append(unit.key)
+            if result.code:
+                self.failed.append(unit.key)
+            elif self._latest(unit) != prior:  # not a job that started after the deadline
+                self.ran.append(unit.key)
         self.plan.write_state()
 
     def _eval_stage(self, tables) -> None:
@@ -212,9 +185,9 @@ class Runner:
             (out / "manifest.yaml").write_text(yaml.safe_dump(self.plan.manifest(table), sort_keys=False))
             jobs.append(self.plan.table_overrides(table))
             log.info("tables: %s: %s", table.name, _cmd("eval_table", jobs[-1]))
-        codes = launch(SCRIPTS / "eval_table.py", jobs, self._hydra("tables"), name=f"{self.exp.name}-tables")
-        for table, code in zip(tables, codes, strict=True):
-            if code == 0:
+        results = launch(SCRIPTS / "eval_table.py", jobs, self._hydra("tables"), name=f"{self.exp.name}-tables")
+        for table, result in zip(tables, results, strict=True):
+            if result.code == 0:
                 self.plan.state["tables"][table.name] = {"hash": self.plan.table_hash(table)}
                 self.ran.append(f"table {table.name}")
             else:

@@ -132,6 +132,7 @@ def validate_train_cfg(cfg: TrainCfg) -> None:
             raise ValueError(f"{key}={value}: must be >= 1")
     nonnegative = {
         "max_minutes": cfg.max_minutes,
+        "deadline": cfg.deadline,
         "torch_threads": cfg.torch_threads,
         "algo.critic_warmup_iterations": cfg.algo.critic_warmup_iterations,
         "algo.max_noise_std": cfg.algo.max_noise_std,
@@ -278,14 +279,26 @@ def _restore_training_state(
     env.generator.set_state(infos["env_rng"])
 
 
-def train(cfg: TrainCfg) -> Path:
+def budget_minutes(cfg: TrainCfg) -> float:
+    """The wall-clock minutes left from now: ``max_minutes`` and what ``deadline`` leaves, the lesser (0: none)."""
+    budgets = [cfg.max_minutes] if cfg.max_minutes > 0 else []
+    if cfg.deadline > 0:
+        budgets.append(max((cfg.deadline - time.time()) / 60.0, 1e-6))
+    return min(budgets, default=0.0)
+
+
+def train(cfg: TrainCfg) -> Path | None:
     """Train PPO per ``cfg``; returns the run folder (config.yaml, model_*.pt, metrics.rrd, metrics.csv).
 
     ``cfg.resume`` continues that checkpoint's run in its own folder (iteration count, optimiser, normaliser,
     RNG, curriculum) up to ``max_iterations`` in total; ``cfg.max_minutes`` > 0 stops after the iteration that
-    passes the budget and saves it, so one training can span several sittings.
+    passes the budget and saves it, so one training can span several sittings. ``cfg.deadline`` (Unix time) is
+    such an end too; a job that starts after it runs and writes nothing and returns None.
     """
     validate_train_cfg(cfg)
+    if cfg.deadline > 0 and time.time() >= cfg.deadline:
+        log.info("deadline passed before the run started: nothing run (%s)", cfg.resume or cfg.run_dir or "new run")
+        return None
     cfg = for_this_rank(cfg)
     torch.manual_seed(cfg.seed)
     set_torch_threads(cfg.torch_threads)
@@ -337,7 +350,7 @@ def _train_in(cfg: TrainCfg, env: TraversalEnv, run_dir: Path) -> Path:
         return run_dir
     if isinstance(runner.alg, CriticWarmupPPO):
         runner.alg.start_at(runner.current_learning_iteration)
-    runner.logger.set_budget(cfg.max_iterations, cfg.max_minutes, cfg.verbose)
+    runner.logger.set_budget(cfg.max_iterations, budget_minutes(cfg), cfg.verbose)
     try:
         with quiet_constructor(cfg.verbose):  # rsl_rl's "Storing git diff" lines
             runner.learn(remaining, init_at_random_ep_len=not cfg.resume)
@@ -346,8 +359,9 @@ def _train_in(cfg: TrainCfg, env: TraversalEnv, run_dir: Path) -> Path:
         runner.save(str(run_dir / f"model_{it}.pt"))
         runner.logger.stop_logging_writer()
         log.info(
-            "max_minutes=%g reached: saved model_%d.pt; resume=%s continues",
+            "time budget reached (max_minutes=%g, deadline=%g): saved model_%d.pt; resume=%s continues",
             cfg.max_minutes,
+            cfg.deadline,
             it,
             run_dir / f"model_{it}.pt",
         )

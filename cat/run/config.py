@@ -128,6 +128,7 @@ class TrainCfg:
     num_envs: int | None = None  # overrides task.num_envs when set
     max_iterations: int = 1500  # total PPO iterations of the run (a resumed run continues up to this count)
     max_minutes: float = 0.0  # > 0: stop cleanly after this much wall-clock, save, and resume later
+    deadline: float = 0.0  # > 0: also stop so at this Unix time (a sitting's end, shared by jobs a launcher queues)
     seed: int = 0
     verbose: bool = False  # rsl_rl's per-iteration console block and network printout instead of one log line
     torch_threads: int = 0  # torch intra-op threads (0: torch's default); 1 when other work shares the cores

@@ -46,6 +46,7 @@ def resume_config(checkpoint: str | os.PathLike, overrides: list[str]) -> TrainC
     own.
     """
     base = OmegaConf.structured(load_run_config(checkpoint))
+    base.deadline = 0.0  # an earlier sitting's end, long past: a deadline holds only when given again
     dotlist = []
     for item in overrides:
         key, value = item.split("=", 1)

@@ -76,3 +76,18 @@ def test_a_run_started_after_its_deadline_runs_nothing(tmp_path, caplog):
     (tmp_path / "run/config.yaml").write_text(config.replace("\ndeadline: 0.0\n", "\ndeadline: 1000.0\n"))
     assert resume_config(run / "model_0.pt", ["max_iterations=2"]).deadline == 0.0
     assert resume_config(run / "model_0.pt", ["deadline=5"]).deadline == 5.0
+
+
+def test_runs_queued_past_the_sittings_end_are_left_for_the_next(tmp_path, caplog):
+    """Sequential launcher, a 6-second sitting, 1,000 iterations each: the first run stops at the deadline and
+    saves; the two queued behind it start after it, run nothing and are left for the next sitting."""
+    cells = {"a": {"task": "flat", "iterations": 1000}, "b": {"task": "flat", "iterations": 1000, "seeds": [1, 2]}}
+    exp = tmp_path / "sit.yaml"
+    exp.write_text(yaml.safe_dump({"common": COMMON, "cells": cells}))
+    mod = load_script(REPO / "scripts" / "experiment.py")
+    with caplog.at_level(logging.INFO):
+        assert mod.main([f"experiment={exp}", f"root={tmp_path / 'exps'}", "max_minutes=0.1"]) == 0
+    assert list((tmp_path / "exps/sit/runs/a/seed0").glob("model_*.pt"))  # stopped by the deadline, saved
+    assert not (tmp_path / "exps/sit/runs/b/seed1").exists() and not (tmp_path / "exps/sit/runs/b/seed2").exists()
+    assert caplog.text.count("deadline passed before the run started") == 2
+    assert "ran a@0; left a@0, b@1, b@2" in caplog.text

@@ -358,10 +358,11 @@ def _train_in(cfg: TrainCfg, env: TraversalEnv, run_dir: Path) -> Path:
         it = runner.current_learning_iteration
         runner.save(str(run_dir / f"model_{it}.pt"))
         runner.logger.stop_logging_writer()
+        end = time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(cfg.deadline)) if cfg.deadline > 0 else "none"
         log.info(
-            "time budget reached (max_minutes=%g, deadline=%g): saved model_%d.pt; resume=%s continues",
+            "time budget reached (max_minutes=%g, deadline %s): saved model_%d.pt; resume=%s continues",
             cfg.max_minutes,
-            cfg.deadline,
+            end,
             it,
             run_dir / f"model_{it}.pt",
         )

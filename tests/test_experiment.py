@@ -41,7 +41,7 @@ def _summary(caplog) -> str:
     return next(r.getMessage() for r in reversed(caplog.records) if "experiment exp: ran" in r.getMessage())
 
 
-def test_dag_skip_resume_and_rerun_of_a_changed_cell(tmp_path, caplog):
+def test_dag_skip_resume_and_rerun_of_a_changed_cell(tmp_path, caplog, capsys):
     root = tmp_path / "exps"
     cells = {
         "spec": {"task": "flat", "init": "prior", "iterations": 1},  # declared first, runs second
@@ -75,7 +75,11 @@ def test_dag_skip_resume_and_rerun_of_a_changed_cell(tmp_path, caplog):
 
     cells["prior"]["overrides"] = ["algo.learning_rate=0.0002"]  # prior changed: it and spec re-run, other not
     exp = _write(tmp_path, cells)
+    code, _ = _experiment([*args, "dry_run=true"], caplog)  # the dry run names what changed
+    assert "# changed since its run: algo.learning_rate: 0.0003 -> 0.0002" in capsys.readouterr().out
     code, _ = _experiment(args, caplog)
+    assert "prior@0: changed since its run (algo.learning_rate: 0.0003 -> 0.0002)" in caplog.text
+    assert "spec@0: changed since its run (no config value differs: its inputs (init / teacher" in caplog.text
     assert code == 0 and "ran prior@0, spec@0;" in _summary(caplog)
     again = _mtimes(folder)
     assert again["runs/other/seed1/model_0.pt"] == first["runs/other/seed1/model_0.pt"]

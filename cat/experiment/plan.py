@@ -98,6 +98,21 @@ def _comparable(cfg) -> dict:
     return out
 
 
+_ABSENT = "(absent)"
+
+
+def _diff(a: dict, b: dict, prefix: str = "") -> list[str]:
+    """``key: a -> b`` for every leaf where two nested dicts differ (dotted keys, sorted)."""
+    out = []
+    for key in sorted(set(a) | set(b)):
+        x, y = a.get(key, _ABSENT), b.get(key, _ABSENT)
+        if isinstance(x, dict) and isinstance(y, dict):
+            out += _diff(x, y, f"{prefix}{key}.")
+        elif x != y:
+            out.append(f"{prefix}{key}: {x} -> {y}")
+    return out
+
+
 def _earlier_form(config: dict, form: int) -> dict | None:
     """``config`` (a ``_comparable`` dict) as ``FIELD_CONTACT_HASHED[form]`` hashed it; None: a field run whose
     judgement is not that form's."""
@@ -262,6 +277,25 @@ class Plan:
 
     def minutes_used(self, unit: Unit) -> float:
         return float(self.state["units"].get(unit.key, {}).get("minutes", 0.0))
+
+    def changes(self, unit: Unit, limit: int = 4) -> str:
+        """What differs between the run in the unit's folder and the unit now, for a stale run's message: the
+        config keys (``key: theirs -> now``), else what else a hash reads (inputs, legs, the set of keys: a key
+        added to ``TrainCfg`` without a ``NEUTRAL_DEFAULTS`` entry)."""
+        from cat.learning.runs import load_run_config
+
+        latest = latest_checkpoint(unit.run_dir)
+        try:
+            theirs = _comparable(load_run_config(latest[1])) if latest else None
+        except Exception:  # an unreadable config: nothing to compare
+            theirs = None
+        if theirs is None:
+            return "its config is not readable"
+        diffs = _diff(theirs, _comparable(load_config(list(unit.base))))
+        if not diffs:
+            return "no config value differs: its inputs (init / teacher checkpoints), its legs, or the keys hashed"
+        more = f" and {len(diffs) - limit} more" if len(diffs) > limit else ""
+        return "; ".join(diffs[:limit]) + more
 
     def adoptable(self, unit: Unit) -> bool:
         """A run that the state does not know (its printed command run by hand, e.g. under torchrun) is the

@@ -63,6 +63,8 @@ class Runner:
             for unit in self.plan.units_of([c for c in stage if c in self.cells]):
                 status = self.plan.status(unit)
                 lines.append(f"[stage {k}] {unit.key} ({status}) -> {unit.checkpoint()}")
+                if status == "stale":
+                    lines.append(f"  # changed since its run: {self.plan.changes(unit)}")
                 if unit.cell.note:
                     lines.append(f"  # {unit.cell.note}")
                 lines += [f"  {_cmd('train', o)}" for o in self.plan.chain(unit)]
@@ -123,7 +125,8 @@ class Runner:
         status = self.plan.status(unit)
         if status == "stale":
             aside = unit.run_dir.with_name(f"{unit.run_dir.name}.stale-{time.strftime('%Y%m%d-%H%M%S')}")
-            log.info("%s: config changed since its run: moving %s aside to %s", unit.key, unit.run_dir, aside)
+            log.warning("%s: changed since its run (%s): moving %s aside to %s and training it anew", unit.key,
+                        self.plan.changes(unit), unit.run_dir, aside)  # fmt: skip
             unit.run_dir.rename(aside)
             status = "run"
         if status == "run":

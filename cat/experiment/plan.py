@@ -278,20 +278,27 @@ class Plan:
     def minutes_used(self, unit: Unit) -> float:
         return float(self.state["units"].get(unit.key, {}).get("minutes", 0.0))
 
+    @staticmethod
+    def run_config(unit: Unit):
+        """The TrainCfg of the run in the unit's folder (its latest checkpoint's), None without a readable one."""
+        from cat.learning.runs import load_run_config
+
+        latest = latest_checkpoint(unit.run_dir)
+        if latest is None or not (unit.run_dir / "config.yaml").is_file():
+            return None
+        try:
+            return load_run_config(latest[1])
+        except Exception:  # an unreadable or foreign config
+            return None
+
     def changes(self, unit: Unit, limit: int = 4) -> str:
         """What differs between the run in the unit's folder and the unit now, for a stale run's message: the
         config keys (``key: theirs -> now``), else what else a hash reads (inputs, legs, the set of keys: a key
         added to ``TrainCfg`` without a ``NEUTRAL_DEFAULTS`` entry)."""
-        from cat.learning.runs import load_run_config
-
-        latest = latest_checkpoint(unit.run_dir)
-        try:
-            theirs = _comparable(load_run_config(latest[1])) if latest else None
-        except Exception:  # an unreadable config: nothing to compare
-            theirs = None
+        theirs = self.run_config(unit)
         if theirs is None:
             return "its config is not readable"
-        diffs = _diff(theirs, _comparable(load_config(list(unit.base))))
+        diffs = _diff(_comparable(theirs), _comparable(load_config(list(unit.base))))
         if not diffs:
             return "no config value differs: its inputs (init / teacher checkpoints), its legs, or the keys hashed"
         more = f" and {len(diffs) - limit} more" if len(diffs) > limit else ""
@@ -300,19 +307,16 @@ class Plan:
     def adoptable(self, unit: Unit) -> bool:
         """A run that the state does not know (its printed command run by hand, e.g. under torchrun) is the
         unit's when its config.yaml is the unit's config at the leg it stands in, with the expected inputs."""
-        from cat.learning.runs import load_run_config
-
-        latest = latest_checkpoint(unit.run_dir)
-        if latest is None or not (unit.run_dir / "config.yaml").is_file():
+        raw = self.run_config(unit)
+        if raw is None:  # none, or an unreadable or foreign config: not this unit's run
             return False
         try:
-            theirs = _comparable(load_run_config(latest[1]))
+            theirs = _comparable(raw)
             legs = unit.cell.legs
             # the config after each leg (a leg's keys are in it once the run resumed into that leg)
             mine = [_comparable(load_config([*unit.base, *(o for leg in legs[:j] for o in leg.overrides)]))
                     for j in range(len(legs) + 1)]  # fmt: skip
-            raw = load_run_config(latest[1])
-        except Exception:  # an unreadable or foreign config: not this unit's run
+        except Exception:  # a foreign config: not this unit's run
             return False
         fresh = dict(o.split("=", 1) for o in self.fresh_overrides(unit))
         teachers = [t for t in fresh.get("teachers", "[]").strip("[]").split(",") if t]

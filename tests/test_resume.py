@@ -3,6 +3,11 @@
 
 from __future__ import annotations
 
+import os
+import signal
+import threading
+import time
+
 import pytest
 import torch
 
@@ -65,6 +70,31 @@ def test_max_minutes_stops_saves_and_resume_counts_on(tmp_path):
     train(resume_config(saved[0], ["max_iterations=2", "max_minutes=0"]))
     assert torch.load(run / "model_1.pt", weights_only=True)["iter"] == 1
     assert (run / "metrics_1.rrd").is_file()  # the resumed part is recorded beside the first
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGUSR1])
+def test_a_stop_signal_saves_the_iteration_and_resume_counts_on(tmp_path, signum):
+    """A kill or a scheduler's preemption notice mid-run: the iteration finishes, is saved, the run resumes."""
+    before = signal.getsignal(signum)
+    folder = tmp_path / "run"
+
+    def send_once_training():
+        deadline = time.monotonic() + 120
+        while not (folder / "model_0.pt").exists() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        os.kill(os.getpid(), signum)
+
+    sender = threading.Thread(target=send_once_training, daemon=True)
+    sender.start()
+    run = train(load_config(_base(tmp_path, "max_iterations=100000", "algo.save_interval=100000", f"run_dir={folder}")))
+    sender.join()
+    assert run == folder
+    (last,) = [p for p in run.glob("model_*.pt") if p.name != "model_0.pt"]  # the stop's save, nothing else
+    it = torch.load(last, weights_only=True)["iter"]
+    assert 1 <= it < 1000 and (run / f"env_{it}.pt").is_file()
+    assert signal.getsignal(signum) == before  # the process's own handler is back
+    train(resume_config(last, [f"max_iterations={it + 2}"]))
+    assert torch.load(run / f"model_{it + 1}.pt", weights_only=True)["iter"] == it + 1
 
 
 @pytest.mark.parametrize(

@@ -5,7 +5,8 @@
 * a ``ProgressLogger``: rsl_rl prints an 80-column block with ANSI codes every iteration; by default it goes
   nowhere and a single log line per iteration takes its place (``verbose=true`` restores the block), and the
   ``max_minutes`` budget raises ``BudgetReached`` after the iteration that passes it (the update and the iteration
-  count are final then, so a budget stop leaves a complete iteration to save);
+  count are final then, so a budget stop leaves a complete iteration to save); a stop signal (SIGTERM, SIGUSR1:
+  a kill, a scheduler's preemption notice) does the same after the iteration it arrives in (``stop_on_signals``);
 * checkpoints that also carry what a resume needs beyond rsl_rl's (RNG streams, curriculum: ``state()``, stored
   in ``infos``) and an env snapshot file beside them.
 
@@ -16,9 +17,12 @@ named through the algorithm config's ``class_name``.
 from __future__ import annotations
 
 import logging
+import signal
 import statistics
+import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 
 import torch
 from rsl_rl.runners import DistillationRunner, OnPolicyRunner
@@ -34,6 +38,17 @@ class BudgetReached(Exception):
     """Raised after the iteration that passes ``max_minutes``."""
 
 
+class StopRequested(BudgetReached):
+    """Raised after the iteration in which a stop signal arrived: saved like a budget stop, so the run resumes."""
+
+    def __init__(self, signum: int):
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+STOP_SIGNALS = (signal.SIGTERM, signal.SIGUSR1)
+
+
 class ProgressLogger(Logger):
     """rsl_rl's ``Logger``: one quiet progress line per iteration (or rsl_rl's block if ``verbose``) and the time
     budget set by ``set_budget`` (none until then)."""
@@ -41,6 +56,7 @@ class ProgressLogger(Logger):
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
         self.total, self.verbose, self.deadline = 0, False, None
+        self.stop_signal: int | None = None  # set by ``request_stop`` (a signal handler)
         self.steps_per_iteration = self.cfg["num_steps_per_env"] * self.num_envs
 
     def set_budget(self, total: int, minutes: float = 0.0, verbose: bool = False) -> None:
@@ -63,8 +79,35 @@ class ProgressLogger(Logger):
                 it + 1, self.total, self.steps_per_iteration / max(collect + learn, 1e-9), collect, learn, rew,
                 length, sr,
             )  # fmt: skip
+        if self.stop_signal is not None:
+            raise StopRequested(self.stop_signal)
         if self.deadline is not None and time.monotonic() >= self.deadline:
             raise BudgetReached
+
+    def request_stop(self, signum: int) -> None:
+        """Stop after the current iteration (``StopRequested``); a second request stops now (KeyboardInterrupt)."""
+        if self.stop_signal is not None:
+            raise KeyboardInterrupt(f"second {signal.Signals(signum).name}: stopping without saving")
+        self.stop_signal = signum
+        log.warning("%s received: finishing this iteration, then saving", signal.Signals(signum).name)
+
+
+@contextmanager
+def stop_on_signals(logger: ProgressLogger, signals: tuple[int, ...] = STOP_SIGNALS) -> Iterator[None]:
+    """While inside, ``signals`` ask ``logger`` to stop after the iteration (and save) instead of killing the
+    process; the previous handlers come back on exit. Only the main thread can own handlers: elsewhere (a thread
+    pool's worker) it does nothing."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {s: signal.getsignal(s) for s in signals}
+    for s in signals:
+        signal.signal(s, lambda signum, frame: logger.request_stop(signum))
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
 
 
 class _CatRunner:

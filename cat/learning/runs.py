@@ -44,7 +44,13 @@ from cat.learning.layout_init import init_from_prior
 from cat.learning.precision import check_mixed_precision
 from cat.learning.rehearsal import rehearsal_cfg
 from cat.learning.rerun_writer import prune_metrics
-from cat.learning.runners import BudgetReached, CatDistillationRunner, CatOnPolicyRunner
+from cat.learning.runners import (
+    BudgetReached,
+    CatDistillationRunner,
+    CatOnPolicyRunner,
+    StopRequested,
+    stop_on_signals,
+)
 from cat.learning.warm_start import adapt_to_new_inputs
 from cat.run.config import ALGOS, DistillCfg, TrainCfg, check_obs_groups, runner_cfg, student_model_cfg
 from cat.run.config_file import load_run_config, resume_config, save_config  # noqa: F401  (re-exported)
@@ -352,12 +358,15 @@ def _train_in(cfg: TrainCfg, env: TraversalEnv, run_dir: Path) -> Path:
         runner.alg.start_at(runner.current_learning_iteration)
     runner.logger.set_budget(cfg.max_iterations, budget_minutes(cfg), cfg.verbose)
     try:
-        with quiet_constructor(cfg.verbose):  # rsl_rl's "Storing git diff" lines
+        with quiet_constructor(cfg.verbose), stop_on_signals(runner.logger):  # quiet: rsl_rl's "Storing git diff"
             runner.learn(remaining, init_at_random_ep_len=not cfg.resume)
-    except BudgetReached:
+    except BudgetReached as stop:
         it = runner.current_learning_iteration
         runner.save(str(run_dir / f"model_{it}.pt"))
         runner.logger.stop_logging_writer()
+        if isinstance(stop, StopRequested):
+            log.info("stopped by %s: saved model_%d.pt; resume=%s continues", stop, it, run_dir / f"model_{it}.pt")
+            return run_dir
         end = time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(cfg.deadline)) if cfg.deadline > 0 else "none"
         log.info(
             "time budget reached (max_minutes=%g, deadline %s): saved model_%d.pt; resume=%s continues",

@@ -21,6 +21,9 @@ def _row_cell(table, row: str, column: str = "crouch-pass") -> str:
     return table.methods[row][column][0]
 
 
+COLUMNS = {"crouch-pass": "crouch_pass", "side-crouch": "side_crouch"}  # column -> its task
+
+
 def test_every_row_has_the_same_budget_scenes_prior_and_trials():
     """One policy per (method, type): in each column every row trains the same task from the same prior."""
     exp = load_experiment("table1")
@@ -28,7 +31,7 @@ def test_every_row_has_the_same_budget_scenes_prior_and_trials():
     assert table.equal_budget == ROWS
     assert list(table.methods)[:5] == ROWS and "Ours (specialists)" in table.methods
     columns = {tuple(table.methods[r]) for r in ROWS}
-    assert columns == {("crouch-pass",)}
+    assert columns == {tuple(COLUMNS)}
     plan = Plan(exp, root="/nonexistent")
     names = {_row_cell(table, r) for r in ROWS}
     units = [u for u in plan.units.values() if u.cell.name in names]
@@ -41,6 +44,21 @@ def test_every_row_has_the_same_budget_scenes_prior_and_trials():
     assert all(s == [0] for r, s in seeds.items() if r not in two)
     methods = {exp.cells[_row_cell(table, r)].method for r in ROWS}
     assert methods == {"ours", "wo_obs_field", "wo_r_field", "astraversal", "humanoid_parkour"}
+
+
+def test_the_second_column_continues_each_rows_own_first_column_run():
+    """side-crouch: every row's cell starts from that row's own crouch-pass cell (same seed) for 25 M more env steps."""
+    exp = load_experiment("table1")
+    table = exp.tables["table1"]
+    plan = Plan(exp, root="/nonexistent")
+    for row in ROWS:
+        cell = exp.cells[_row_cell(table, row, "side-crouch")]
+        first = _row_cell(table, row)
+        assert cell.init == first and cell.task == "side_crouch" and cell.method == exp.cells[first].method
+        assert cell.env_steps == 25_000_000 and cell.overrides == ["task.mirror_scenes=true"]
+        for seed in cell.seeds:
+            unit = plan.units[f"{cell.name}@{seed}"]
+            assert unit.inputs["init"] == f"{first}@{seed}"  # its own first-column run of the same seed
 
 
 def test_the_first_protocol_stays_loadable_as_its_record():
@@ -74,12 +92,17 @@ def _variant(tmp_path, edit) -> str:
         (lambda r: (r["cells"]["ours_crouch_pass"].pop("env_steps"), r["cells"]["ours_crouch_pass"].update(minutes=60)),
          r"row 'Ours' \(cell ours_crouch_pass\) has a minutes budget"),
         (lambda r: r["tables"]["table1"]["methods"].update({"Ours": ["ours_crouch_pass"]}),
-         r"row 'Ours' \(one cell\) is not shaped like row 'ASTraversal' \(types \['crouch-pass'\]\)"),
+         r"row 'Ours' \(one cell\) is not shaped like row 'ASTraversal' \(types \['crouch-pass', 'side-crouch'\]\)"),
         (lambda r: r["tables"]["table1"]["methods"].update(
             {"Ours": {"crouch-pass": ["ours_crouch_pass", "wo_r_field_crouch_pass"]}}),
          r"row 'Ours', column 'crouch-pass', must be one cell"),
         (lambda r: r["tables"]["table1"]["equal_budget"].append("Ours (generalist)"),
          r"equal_budget names 'Ours \(generalist\)', not a row"),
+        (lambda r: r["cells"]["astraversal_side_crouch"].update(init="ours_crouch_pass"),
+         r"column 'side-crouch': row 'ASTraversal' \(cell astraversal_side_crouch\) differs .* in init: "
+         r"'ours_crouch_pass' vs \"the row's own crouch-pass cell\""),
+        (lambda r: r["cells"]["humanoid_parkour_side_crouch"].update(init="checkpoints/crouch_pass/model_599.pt"),
+         r"row 'Humanoid Parkour' \(cell humanoid_parkour_side_crouch\) differs .* in init"),
     ],
 )  # fmt: skip
 def test_a_row_that_differs_is_refused_naming_the_difference(tmp_path, edit, message):
@@ -128,15 +151,16 @@ def test_bar_tasks_ride_the_swing_foot_target_on_the_bars(task):
     assert params.foot_clearance_lookahead == 0.3 and params.foot_clearance_min_only
 
 
+@pytest.mark.parametrize("column", list(COLUMNS))
 @pytest.mark.parametrize("row", ROWS)
-def test_each_rows_column_cell_builds_and_steps(tmp_path, row):
-    """The crouch-pass column's cells: each method's env builds on the column's task and steps (the run would start)."""
+def test_each_rows_column_cell_builds_and_steps(tmp_path, row, column):
+    """Each column's cells: each method's env builds on the column's task and steps (the run would start)."""
     import torch
 
     exp = load_experiment("table1")
-    cell = exp.cells[_row_cell(exp.tables["table1"], row)]
+    cell = exp.cells[_row_cell(exp.tables["table1"], row, column)]
     small = ["task.scene_variants=1", "task.warmup_variants=1", "num_envs=2", f"run_root={tmp_path}"]
     cfg = load_config([f"task={cell.task}", f"method={cell.method}", *cell.overrides, *small])
     env = make_env(cfg)
     env.step(torch.zeros(env.num_envs, env.num_actions))
-    assert env.cfg.scene_kind == "crouch-pass" and env.curriculum is not None
+    assert env.cfg.scene_kind == column and env.curriculum is not None

@@ -262,10 +262,13 @@ def check_equal_budget(exp: Experiment, table: Table) -> None:
     method over every type) or a mapping type -> one cell (one policy per (method, type)); every row has the same
     form and the same types. Per column, the rows' cells share task (scenes, curriculum), algo, init (prior),
     overrides, budget and legs, and their seeds are prefixes of one list (seed 0 for every row, more seeds for
-    some); a minutes budget is no equal budget (machines differ). The trials are the table's, the same for every
-    row. One ``ExperimentError`` naming the row (and column) and the difference."""
+    some); a minutes budget is no equal budget (machines differ). An init may also be the row's own cell of another
+    column, the same column for every row (each method continues its own policy: a chain of equal budgets). The
+    trials are the table's, the same for every row. One ``ExperimentError`` naming the row (and column) and the
+    difference."""
     what = f"table {table.name}: equal_budget"
     columns: dict[str | None, dict[str, Cell]] = {}  # None: one cell per row plays every column
+    own: dict[str, dict[str, str | None]] = {}  # row -> its cells -> their column (an init may name one)
     forms: dict[str, tuple] = {}
     for row in table.equal_budget:
         entries = table.methods[row]
@@ -279,6 +282,7 @@ def check_equal_budget(exp: Experiment, table: Table) -> None:
                     f"{what}: {where} must be one cell (a policy per method, or per method and type), got {refs!r}"
                 )
             columns.setdefault(column, {})[row] = exp.cells[cell[0]]
+            own.setdefault(row, {})[cell[0]] = column
             if exp.cells[cell[0]].minutes is not None:
                 raise ExperimentError(f"{what}: row {row!r} (cell {cell[0]}) has a minutes budget; give env_steps")
     if len(set(forms.values())) > 1:
@@ -289,14 +293,15 @@ def check_equal_budget(exp: Experiment, table: Table) -> None:
         }
         raise ExperimentError(f"{what}: row {odd!r} ({shape[odd]}) is not shaped like row {first!r} ({shape[first]})")
     for column, cells in columns.items():
-        _check_column(what + (f": column {column!r}" if column else ""), cells)
+        _check_column(what + (f": column {column!r}" if column else ""), cells, own)
 
 
-def _check_column(what: str, cells: dict[str, Cell]) -> None:
-    """The cells of one column (row -> cell) differ only in method; seeds are prefixes of one list."""
+def _check_column(what: str, cells: dict[str, Cell], own: dict[str, dict[str, str | None]]) -> None:
+    """The cells of one column (row -> cell) differ only in method; seeds are prefixes of one list. ``own``: each
+    row's cells and their columns, so that an init naming the row's own cell compares as that column."""
     longest = max((c.seeds for c in cells.values()), key=len)
     for key in EQUAL_KEYS:
-        values = {row: _comparable_value(cell, key) for row, cell in cells.items()}
+        values = {row: _comparable_value(cell, key, own[row]) for row, cell in cells.items()}
         reprs = [repr(v) for v in values.values()]
         usual = max(reprs, key=reprs.count)  # the value most rows have: the odd row out is named
         others = [r for r, v in values.items() if repr(v) == usual]
@@ -313,8 +318,10 @@ def _check_column(what: str, cells: dict[str, Cell]) -> None:
             )
 
 
-def _comparable_value(cell: Cell, key: str):
+def _comparable_value(cell: Cell, key: str, own: dict[str, str | None]):
     value = getattr(cell, key)
+    if key == "init" and value in own:
+        return f"the row's own {own[value]} cell"
     if key == "overrides":
         return sorted(value)
     if key == "legs":

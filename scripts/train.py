@@ -25,7 +25,7 @@ def _load(overrides: list[str]):
 
 def _job(cfg) -> int:
     run_dir = train(cfg)
-    print(f"run folder: {run_dir}" if run_dir else "deadline passed: nothing run")
+    print(f"run folder: {run_dir}" if run_dir else "nothing run: the deadline passed or a stop signal came first")
     return 0
 
 

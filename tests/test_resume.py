@@ -12,6 +12,7 @@ import pytest
 import torch
 
 from cat.learning.hydra_cfg import load_config
+from cat.learning.runners import clear_stop_signal, stop_signal_received
 from cat.learning.runs import resume_config, train
 
 
@@ -72,9 +73,9 @@ def test_max_minutes_stops_saves_and_resume_counts_on(tmp_path):
     assert (run / "metrics_1.rrd").is_file()  # the resumed part is recorded beside the first
 
 
-@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGUSR1])
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGUSR1, signal.SIGINT])
 def test_a_stop_signal_saves_the_iteration_and_resume_counts_on(tmp_path, signum):
-    """A kill or a scheduler's preemption notice mid-run: the iteration finishes, is saved, the run resumes."""
+    """A kill, a scheduler's notice or Ctrl-C mid-run: the iteration finishes, is saved, the run resumes."""
     before = signal.getsignal(signum)
     folder = tmp_path / "run"
 
@@ -86,8 +87,16 @@ def test_a_stop_signal_saves_the_iteration_and_resume_counts_on(tmp_path, signum
 
     sender = threading.Thread(target=send_once_training, daemon=True)
     sender.start()
-    run = train(load_config(_base(tmp_path, "max_iterations=100000", "algo.save_interval=100000", f"run_dir={folder}")))
-    sender.join()
+    try:
+        long_run = _base(tmp_path, "max_iterations=100000", "algo.save_interval=100000", f"run_dir={folder}")
+        run = train(load_config(long_run))
+        sender.join()
+        assert stop_signal_received() == signum
+        # the next run of this process (a sweep's, a sitting's) does not start: the user asked the process to stop
+        assert train(load_config(_base(tmp_path, "max_iterations=2", f"run_dir={tmp_path / 'next'}"))) is None
+        assert not (tmp_path / "next").exists()
+    finally:
+        clear_stop_signal()
     assert run == folder
     (last,) = [p for p in run.glob("model_*.pt") if p.name != "model_0.pt"]  # the stop's save, nothing else
     it = torch.load(last, weights_only=True)["iter"]

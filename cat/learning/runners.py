@@ -5,8 +5,9 @@
 * a ``ProgressLogger``: rsl_rl prints an 80-column block with ANSI codes every iteration; by default it goes
   nowhere and a single log line per iteration takes its place (``verbose=true`` restores the block), and the
   ``max_minutes`` budget raises ``BudgetReached`` after the iteration that passes it (the update and the iteration
-  count are final then, so a budget stop leaves a complete iteration to save); a stop signal (SIGTERM, SIGUSR1:
-  a kill, a scheduler's preemption notice) does the same after the iteration it arrives in (``stop_on_signals``);
+  count are final then, so a budget stop leaves a complete iteration to save); a stop signal (SIGTERM, SIGUSR1,
+  SIGINT: a kill, a scheduler's notice, Ctrl-C) does the same after the iteration it arrives in (``stop_on_signals``;
+  a second one stops at once);
 * checkpoints that also carry what a resume needs beyond rsl_rl's (RNG streams, curriculum: ``state()``, stored
   in ``infos``) and an env snapshot file beside them.
 
@@ -46,7 +47,19 @@ class StopRequested(BudgetReached):
         self.signum = signum
 
 
-STOP_SIGNALS = (signal.SIGTERM, signal.SIGUSR1)
+STOP_SIGNALS = (signal.SIGTERM, signal.SIGUSR1, signal.SIGINT)  # a kill, a scheduler's notice, Ctrl-C
+_stopped_by: int | None = None  # the stop signal this process received, if any (process-wide, as signals are)
+
+
+def stop_signal_received() -> int | None:
+    """The stop signal a run of this process received (a later run in the same process does not start), or None."""
+    return _stopped_by
+
+
+def clear_stop_signal() -> None:
+    """Forget a received stop signal (for a process that goes on training after one, e.g. a test)."""
+    global _stopped_by
+    _stopped_by = None
 
 
 class ProgressLogger(Logger):
@@ -86,10 +99,12 @@ class ProgressLogger(Logger):
 
     def request_stop(self, signum: int) -> None:
         """Stop after the current iteration (``StopRequested``); a second request stops now (KeyboardInterrupt)."""
+        global _stopped_by
         if self.stop_signal is not None:
             raise KeyboardInterrupt(f"second {signal.Signals(signum).name}: stopping without saving")
-        self.stop_signal = signum
-        log.warning("%s received: finishing this iteration, then saving", signal.Signals(signum).name)
+        self.stop_signal = _stopped_by = signum
+        name = signal.Signals(signum).name
+        log.warning("%s received: finishing this iteration, then saving (again: stop now, unsaved)", name)
 
 
 @contextmanager

@@ -6,6 +6,7 @@ import functools
 import logging
 import os
 import shutil
+import signal
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -50,6 +51,7 @@ from cat.learning.runners import (
     CatOnPolicyRunner,
     StopRequested,
     stop_on_signals,
+    stop_signal_received,
 )
 from cat.learning.warm_start import adapt_to_new_inputs
 from cat.run.config import ALGOS, DistillCfg, TrainCfg, check_obs_groups, runner_cfg, student_model_cfg
@@ -299,11 +301,16 @@ def train(cfg: TrainCfg) -> Path | None:
     ``cfg.resume`` continues that checkpoint's run in its own folder (iteration count, optimiser, normaliser,
     RNG, curriculum) up to ``max_iterations`` in total; ``cfg.max_minutes`` > 0 stops after the iteration that
     passes the budget and saves it, so one training can span several sittings. ``cfg.deadline`` (Unix time) is
-    such an end too; a job that starts after it runs and writes nothing and returns None.
+    such an end too; a job that starts after it runs and writes nothing and returns None. A stop signal
+    (``stop_on_signals``) saves after the iteration in progress; later runs in the same process then return None.
     """
     validate_train_cfg(cfg)
     if cfg.deadline > 0 and time.time() >= cfg.deadline:
         log.info("deadline passed before the run started: nothing run (%s)", cfg.resume or cfg.run_dir or "new run")
+        return None
+    if (signum := stop_signal_received()) is not None:  # a sweep or sitting in this process was told to stop
+        what = cfg.resume or cfg.run_dir or "new run"
+        log.info("%s stopped an earlier run in this process: nothing run (%s)", signal.Signals(signum).name, what)
         return None
     cfg = for_this_rank(cfg)
     torch.manual_seed(cfg.seed)

@@ -66,6 +66,9 @@ def test_dag_skip_resume_and_rerun_of_a_changed_cell(tmp_path, caplog, capsys):
 
     cells["spec"]["iterations"] = 2  # a larger budget: the run is unfinished and continues in its folder
     exp = _write(tmp_path, cells)
+    _experiment([*args, "dry_run=true"], caplog)
+    out = capsys.readouterr().out
+    assert "spec@0 (resume from iteration 1 of 2)" in out and "\nto train: 1 iterations (cells with" in out
     code, _ = _experiment(args, caplog)
     assert code == 0 and "ran spec@0;" in _summary(caplog)
     after = _mtimes(folder)
@@ -118,7 +121,8 @@ def test_dry_run_prints_chains_and_writes_nothing(tmp_path, capsys, caplog):
     code, errors = _experiment([f"experiment={exp}", f"root={tmp_path / 'exps'}", "dry_run=true"], caplog)
     out = capsys.readouterr().out
     assert code == 0 and not errors
-    assert out.index("prior@0") < out.index("spec@0")
+    assert out.index("prior@0") < out.index("spec@0") and "prior@0 (run)" in out
+    assert "to train: 7 iterations" in out  # prior's 2 and spec's 5 (its last leg's count)
     assert f"init={tmp_path / 'exps/exp/runs/prior/seed0/model_1.pt'}" in out
     assert f"resume={tmp_path / 'exps/exp/runs/spec/seed0/model_2.pt'} max_iterations=5 seed=3" in out
     assert not (tmp_path / "exps").exists()

@@ -61,6 +61,18 @@ def test_the_second_column_continues_each_rows_own_first_column_run():
             assert unit.inputs["init"] == f"{first}@{seed}"  # its own first-column run of the same seed
 
 
+def test_the_dry_run_counts_the_iterations_to_train(tmp_path):
+    """An env-step budget is an iteration count: nothing trained yet, every run of the experiment is left to do."""
+    from cat.experiment.runner import ExperimentCfg, Runner
+
+    runner = Runner(ExperimentCfg(experiment="table1", root=str(tmp_path)), [])
+    units = runner.plan.units_of(runner.cells)
+    assert {u.final for u in units} == {1018}
+    assert runner.describe().endswith(
+        f"to train: {1018 * len(units)} iterations (cells with a minutes budget not counted)"
+    )
+
+
 def test_the_first_protocol_stays_loadable_as_its_record():
     """experiment=table1_all_types: one policy per method over all eight types (the 0 % finding of 2026-12-04)."""
     exp = load_experiment("table1_all_types")

@@ -14,7 +14,7 @@ from pathlib import Path
 import yaml
 from tqdm import tqdm
 
-from cat.experiment.plan import Plan, Unit
+from cat.experiment.plan import Plan, Unit, latest_checkpoint
 from cat.experiment.spec import ExperimentError, load_experiment
 from cat.launcher import check_launcher, launch
 
@@ -59,10 +59,18 @@ class Runner:
         lines = [f"experiment {self.exp.name}: {self.plan.folder}"]
         if self.exp.note:
             lines.append(f"  {self.exp.note}")
+        left = 0  # iterations still to train over the units shown
         for k, stage in enumerate(self.plan.stages):
             for unit in self.plan.units_of([c for c in stage if c in self.cells]):
                 status = self.plan.status(unit)
-                lines.append(f"[stage {k}] {unit.key} ({status}) -> {unit.checkpoint()}")
+                shown, timed = status, unit.cell.minutes is not None and unit.cell.iterations is None
+                if status == "resume":
+                    done = latest_checkpoint(unit.run_dir)[0] + 1
+                    shown = f"resume from iteration {done}" + ("" if timed else f" of {unit.final}")
+                    left += 0 if timed else unit.final - done
+                elif status != "done":
+                    left += 0 if timed else unit.final
+                lines.append(f"[stage {k}] {unit.key} ({shown}) -> {unit.checkpoint()}")
                 if status == "stale":
                     lines.append(f"  # changed since its run: {self.plan.changes(unit)}")
                 if unit.cell.note:
@@ -73,6 +81,7 @@ class Runner:
             status = "done" if self.plan.table_done(table) else "run"
             lines.append(f"[table] {name} ({status}) -> {self.plan.table_dir(table)}")
             lines.append(f"  {_cmd('eval_table', self.plan.table_overrides(table))}")
+        lines.append(f"to train: {left} iterations (cells with a minutes budget not counted)")
         return "\n".join(lines)
 
     def minutes_left(self) -> float | None:

@@ -68,7 +68,10 @@ def test_max_minutes_stops_saves_and_resume_counts_on(tmp_path):
     assert [p.name for p in saved] == ["model_0.pt"]  # stopped after the first complete iteration
     snap = torch.load(run / "env_0.pt", weights_only=True)  # tensors and plain data (cat/checkpoint_io.py)
     assert type(snap["obs"]) is dict and torch.is_tensor(snap["sim"]["qpos"])
-    train(resume_config(saved[0], ["max_iterations=2", "max_minutes=0"]))
+    resumed = resume_config(saved[0], ["max_iterations=2"])
+    assert resumed.max_minutes == 0.0 and resumed.deadline == 0.0  # the earlier sitting's budget is not carried over
+    assert resume_config(saved[0], ["max_minutes=7"]).max_minutes == 7.0  # one given again holds
+    train(resumed)
     assert torch.load(run / "model_1.pt", weights_only=True)["iter"] == 1
     assert (run / "metrics_1.rrd").is_file()  # the resumed part is recorded beside the first
 

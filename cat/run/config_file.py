@@ -43,10 +43,14 @@ def resume_config(checkpoint: str | os.PathLike, overrides: list[str]) -> TrainC
     """The config of the run being resumed, with only the keys given on the command line changed.
 
     Config-group choices (``task=``, ``sim=``, ``algo=``, ``method=``) cannot change on resume: the run keeps its
-    own.
+    own. The wall-clock budgets (``max_minutes``, ``deadline``) were the earlier sitting's and are not carried
+    over: a budget holds only when given again.
     """
     base = OmegaConf.structured(load_run_config(checkpoint))
-    base.deadline = 0.0  # an earlier sitting's end, long past: a deadline holds only when given again
+    # an earlier sitting's end (long past) and its minutes: a resumed run kept stopping after the old sitting's
+    # max_minutes, whatever the new sitting had left (found 2026-12-05: a run resumed by the deadline runner
+    # stopped after 26 of its 44 minutes)
+    base.deadline, base.max_minutes = 0.0, 0.0
     dotlist = []
     for item in overrides:
         key, value = item.split("=", 1)

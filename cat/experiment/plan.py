@@ -155,6 +155,11 @@ class Unit:
         return f"{self.cell.name}@{self.seed}"
 
     @property
+    def timed(self) -> bool:
+        """A minutes budget and no iteration count: the run ends when its minutes are spent."""
+        return self.cell.minutes is not None and self.cell.iterations is None
+
+    @property
     def final(self) -> int:
         """Iterations of the whole run (last leg's)."""
         return self.cell.legs[-1].iterations if self.cell.legs else self.iterations
@@ -162,7 +167,7 @@ class Unit:
     def checkpoint(self) -> Path:
         """The checkpoint that downstream cells and tables read: the run's last (``model_<final-1>.pt``, or the
         latest one for a minutes budget)."""
-        if self.cell.minutes is not None and self.cell.iterations is None:
+        if self.timed:
             latest = latest_checkpoint(self.run_dir)
             return latest[1] if latest else self.run_dir / "model_<latest>.pt"
         return self.run_dir / f"model_{self.final - 1}.pt"
@@ -336,7 +341,7 @@ class Plan:
         if recorded != unit.hash:
             return "stale"
         it, _ = latest
-        if unit.cell.minutes is not None and unit.cell.iterations is None:
+        if unit.timed:
             done = self.minutes_used(unit) >= unit.cell.minutes
             return "done" if done or it + 1 >= BIG_ITERATIONS else "resume"
         return "done" if it + 1 >= unit.final else "resume"

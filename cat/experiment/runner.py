@@ -14,7 +14,7 @@ from pathlib import Path
 import yaml
 from tqdm import tqdm
 
-from cat.experiment.plan import Plan, Unit, latest_checkpoint
+from cat.experiment.plan import Plan, Unit
 from cat.experiment.spec import ExperimentError, load_experiment
 from cat.launcher import check_launcher, launch
 
@@ -63,13 +63,13 @@ class Runner:
         for k, stage in enumerate(self.plan.stages):
             for unit in self.plan.units_of([c for c in stage if c in self.cells]):
                 status = self.plan.status(unit)
-                shown, timed = status, unit.cell.minutes is not None and unit.cell.iterations is None
+                shown = status
                 if status == "resume":
-                    done = latest_checkpoint(unit.run_dir)[0] + 1
-                    shown = f"resume from iteration {done}" + ("" if timed else f" of {unit.final}")
-                    left += 0 if timed else unit.final - done
+                    done = self._latest(unit)[0] + 1
+                    shown = f"resume from iteration {done}" + ("" if unit.timed else f" of {unit.final}")
+                    left += 0 if unit.timed else unit.final - done
                 elif status != "done":
-                    left += 0 if timed else unit.final
+                    left += 0 if unit.timed else unit.final
                 lines.append(f"[stage {k}] {unit.key} ({shown}) -> {unit.checkpoint()}")
                 if status == "stale":
                     lines.append(f"  # changed since its run: {self.plan.changes(unit)}")

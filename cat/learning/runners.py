@@ -69,7 +69,6 @@ class ProgressLogger(Logger):
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
         self.total, self.verbose, self.deadline = 0, False, None
-        self.stop_signal: int | None = None  # set by ``request_stop`` (a signal handler)
         self.steps_per_iteration = self.cfg["num_steps_per_env"] * self.num_envs
 
     def set_budget(self, total: int, minutes: float = 0.0, verbose: bool = False) -> None:
@@ -92,32 +91,34 @@ class ProgressLogger(Logger):
                 it + 1, self.total, self.steps_per_iteration / max(collect + learn, 1e-9), collect, learn, rew,
                 length, sr,
             )  # fmt: skip
-        if self.stop_signal is not None:
-            raise StopRequested(self.stop_signal)
+        if _stopped_by is not None:
+            raise StopRequested(_stopped_by)
         if self.deadline is not None and time.monotonic() >= self.deadline:
             raise BudgetReached
 
-    def request_stop(self, signum: int) -> None:
-        """Stop after the current iteration (``StopRequested``); a second request stops now (KeyboardInterrupt)."""
-        global _stopped_by
-        if self.stop_signal is not None:
-            raise KeyboardInterrupt(f"second {signal.Signals(signum).name}: stopping without saving")
-        self.stop_signal = _stopped_by = signum
-        name = signal.Signals(signum).name
-        log.warning("%s received: finishing this iteration, then saving (again: stop now, unsaved)", name)
+
+def _request_stop(signum: int, frame=None) -> None:
+    """Signal handler: the training stops after the current iteration (``StopRequested``, raised by the logger); a
+    second signal stops now (KeyboardInterrupt)."""
+    global _stopped_by
+    name = signal.Signals(signum).name
+    if _stopped_by is not None:
+        raise KeyboardInterrupt(f"second {name}: stopping without saving")
+    _stopped_by = signum
+    log.warning("%s received: finishing this iteration, then saving (again: stop now, unsaved)", name)
 
 
 @contextmanager
-def stop_on_signals(logger: ProgressLogger, signals: tuple[int, ...] = STOP_SIGNALS) -> Iterator[None]:
-    """While inside, ``signals`` ask ``logger`` to stop after the iteration (and save) instead of killing the
-    process; the previous handlers come back on exit. Only the main thread can own handlers: elsewhere (a thread
-    pool's worker) it does nothing."""
+def stop_on_signals(signals: tuple[int, ...] = STOP_SIGNALS) -> Iterator[None]:
+    """While inside, ``signals`` stop the training after the iteration (and save) instead of killing the process;
+    the previous handlers come back on exit. Only the main thread can own handlers: elsewhere (a thread pool's
+    worker) it does nothing."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     previous = {s: signal.getsignal(s) for s in signals}
     for s in signals:
-        signal.signal(s, lambda signum, frame: logger.request_stop(signum))
+        signal.signal(s, _request_stop)
     try:
         yield
     finally:

@@ -365,7 +365,7 @@ def _train_in(cfg: TrainCfg, env: TraversalEnv, run_dir: Path) -> Path:
         runner.alg.start_at(runner.current_learning_iteration)
     runner.logger.set_budget(cfg.max_iterations, budget_minutes(cfg), cfg.verbose)
     try:
-        with quiet_constructor(cfg.verbose), stop_on_signals(runner.logger):  # quiet: rsl_rl's "Storing git diff"
+        with quiet_constructor(cfg.verbose), stop_on_signals():  # quiet: rsl_rl's "Storing git diff"
             runner.learn(remaining, init_at_random_ep_len=not cfg.resume)
     except BudgetReached as stop:
         it = runner.current_learning_iteration

@@ -23,6 +23,31 @@ def block_address(ptr: wp.uint64, offset: wp.int64, elem_bytes: wp.int64) -> wp.
     return ptr + wp.uint64(offset) * wp.uint64(elem_bytes)
 
 
+@wp.func
+def grid_contains(u: wp.vec3, nx: int, ny: int, nz: int) -> bool:
+    """Whether continuous grid index ``u`` lies in the ``nx × ny × nz`` grid's box (False for NaN)."""
+    return u[0] >= 0.0 and u[1] >= 0.0 and u[2] >= 0.0 and u[0] <= float(nx) and u[1] <= float(ny) and u[2] <= float(nz)
+
+
+@wp.func
+def grid_strides(nx: int, ny: int, nz: int) -> wp.vec3i:
+    """Flat-index steps to the next voxel along x, y, z; 0 on a one-voxel axis (its two corners coincide)."""
+    return wp.vec3i(wp.where(nx > 1, ny * nz, 0), wp.where(ny > 1, nz, 0), wp.where(nz > 1, 1, 0))
+
+
+@wp.func
+def grid_cell(u: wp.vec3, nx: int, ny: int, nz: int):
+    """The trilinear cell of continuous grid index ``u``: flat index of its lower corner and the fractions along
+    x, y, z. Values sit at voxel centres; outside the centres' span the grid is clamped to its edge."""
+    cx = wp.clamp(u[0] - 0.5, 0.0, float(nx - 1))
+    cy = wp.clamp(u[1] - 0.5, 0.0, float(ny - 1))
+    cz = wp.clamp(u[2] - 0.5, 0.0, float(nz - 1))
+    i0 = wp.min(int(cx), wp.max(nx - 2, 0))
+    j0 = wp.min(int(cy), wp.max(ny - 2, 0))
+    k0 = wp.min(int(cz), wp.max(nz - 2, 0))
+    return (i0 * ny + j0) * nz + k0, wp.vec3(cx - float(i0), cy - float(j0), cz - float(k0))
+
+
 @wp.kernel
 def block_address_kernel(
     ptr: wp.uint64, offsets: wp.array(dtype=wp.int64), elem_bytes: wp.int64, out: wp.array(dtype=wp.uint64)
@@ -86,31 +111,18 @@ def query_kernel(scalar: type, goal_scalar: type) -> wp.Kernel:
         u = (points[t] - scene_origin[s]) * scene_inv_voxel[s]
         if not (wp.isfinite(u[0]) and wp.isfinite(u[1]) and wp.isfinite(u[2])):
             u = wp.vec3(-1.0, -1.0, -1.0)  # NaN/inf point: grid corner value, inside = False
-        inside[t] = (
-            u[0] >= 0.0
-            and u[1] >= 0.0
-            and u[2] >= 0.0
-            and u[0] <= float(nx)
-            and u[1] <= float(ny)
-            and u[2] <= float(nz)
-        )
-        # continuous index of voxel centres, clamped to the grid's centre span ("clamp to edge")
-        cx = wp.clamp(u[0] - 0.5, 0.0, float(nx - 1))
-        cy = wp.clamp(u[1] - 0.5, 0.0, float(ny - 1))
-        cz = wp.clamp(u[2] - 0.5, 0.0, float(nz - 1))
-        i0 = wp.min(int(cx), wp.max(nx - 2, 0))
-        j0 = wp.min(int(cy), wp.max(ny - 2, 0))
-        k0 = wp.min(int(cz), wp.max(nz - 2, 0))
-        fx = cx - float(i0)
-        fy = cy - float(j0)
-        fz = cz - float(k0)
+        inside[t] = grid_contains(u, nx, ny, nz)
+        b, fr = grid_cell(u, nx, ny, nz)
+        fx = fr[0]
+        fy = fr[1]
+        fz = fr[2]
         gx = 1.0 - fx
         gy = 1.0 - fy
         gz = 1.0 - fz
-        o1 = wp.where(nx > 1, ny * nz, 0)
-        o2 = wp.where(ny > 1, nz, 0)
-        o3 = wp.where(nz > 1, 1, 0)
-        b = (i0 * ny + j0) * nz + k0
+        o = grid_strides(nx, ny, nz)
+        o1 = o[0]
+        o2 = o[1]
+        o3 = o[2]
         s00 = gz * wp.vec4(sd[b]) + fz * wp.vec4(sd[b + o3])
         s01 = gz * wp.vec4(sd[b + o2]) + fz * wp.vec4(sd[b + o2 + o3])
         s10 = gz * wp.vec4(sd[b + o1]) + fz * wp.vec4(sd[b + o1 + o3])

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import torch
 import warp as wp
 
-from cat.fields._bank_kernel import block_address
+from cat.fields._bank_kernel import block_address, grid_cell, grid_contains, grid_strides
 
 
 @dataclass
@@ -96,19 +96,13 @@ def min_sdf_kernel(scalar: type, channels: int = 4) -> wp.Kernel:
         sd: wp.array(dtype=v4), u: wp.vec3, nx: int, ny: int, nz: int, o1: int, o2: int, o3: int
     ) -> wp.float32:
         """d at continuous grid index ``u``: the bank query's interpolation (voxel centres, clamp to edge)."""
-        cx = wp.clamp(u[0] - 0.5, 0.0, float(nx - 1))
-        cy = wp.clamp(u[1] - 0.5, 0.0, float(ny - 1))
-        cz = wp.clamp(u[2] - 0.5, 0.0, float(nz - 1))
-        i0 = wp.min(int(cx), wp.max(nx - 2, 0))
-        j0 = wp.min(int(cy), wp.max(ny - 2, 0))
-        k0 = wp.min(int(cz), wp.max(nz - 2, 0))
-        fx = cx - float(i0)
-        fy = cy - float(j0)
-        fz = cz - float(k0)
+        b, fr = grid_cell(u, nx, ny, nz)
+        fx = fr[0]
+        fy = fr[1]
+        fz = fr[2]
         gx = 1.0 - fx
         gy = 1.0 - fy
         gz = 1.0 - fz
-        b = (i0 * ny + j0) * nz + k0
         s00 = gz * float(sd[b][0]) + fz * float(sd[b + o3][0])
         s01 = gz * float(sd[b + o2][0]) + fz * float(sd[b + o2 + o3][0])
         s10 = gz * float(sd[b + o1][0]) + fz * float(sd[b + o1 + o3][0])
@@ -162,9 +156,10 @@ def min_sdf_kernel(scalar: type, channels: int = 4) -> wp.Kernel:
         )
         org = scene_origin[s]
         inv = scene_inv_voxel[s]
-        o1 = wp.where(nx > 1, ny * nz, 0)
-        o2 = wp.where(ny > 1, nz, 0)
-        o3 = wp.where(nz > 1, 1, 0)
+        o = grid_strides(nx, ny, nz)
+        o1 = o[0]
+        o2 = o[1]
+        o3 = o[2]
         for b in range(b0, b1):
             q = body_quat[w * num_bodies + b]  # (w, x, y, z), unit
             qw = q[0]
@@ -197,14 +192,7 @@ def min_sdf_kernel(scalar: type, channels: int = 4) -> wp.Kernel:
                             k1 = k0
                 for k in range(k0, k1):
                     u = (pos + rot * points[k] - org) * inv
-                    if (
-                        u[0] >= 0.0
-                        and u[1] >= 0.0
-                        and u[2] >= 0.0
-                        and u[0] <= float(nx)
-                        and u[1] <= float(ny)
-                        and u[2] <= float(nz)
-                    ):  # also False for NaN: a non-finite point is clear
+                    if grid_contains(u, nx, ny, nz):  # also False for NaN: a non-finite point is clear
                         best = wp.min(best, trilinear_d(sd, u, nx, ny, nz, o1, o2, o3) - off)
             out[w * num_bodies + b] = best
 

@@ -10,6 +10,7 @@ the index is at most one grid's voxel count. No index therefore wraps however ma
 """
 
 import functools
+from typing import Any
 
 import warp as wp
 
@@ -46,6 +47,21 @@ def grid_cell(u: wp.vec3, nx: int, ny: int, nz: int):
     j0 = wp.min(int(cy), wp.max(ny - 2, 0))
     k0 = wp.min(int(cz), wp.max(nz - 2, 0))
     return (i0 * ny + j0) * nz + k0, wp.vec3(cx - float(i0), cy - float(j0), cz - float(k0))
+
+
+@wp.func
+def trilinear(
+    c000: Any, c001: Any, c010: Any, c011: Any, c100: Any, c101: Any, c110: Any, c111: Any, fr: wp.vec3
+) -> Any:
+    """Blend of a cell's eight corner values (``c<ijk>``: +x, +y, +z corner when 1) at fractions ``fr``
+    (:func:`grid_cell`); for scalars and vectors alike."""
+    gz = 1.0 - fr[2]
+    s00 = gz * c000 + fr[2] * c001
+    s01 = gz * c010 + fr[2] * c011
+    s10 = gz * c100 + fr[2] * c101
+    s11 = gz * c110 + fr[2] * c111
+    gy = 1.0 - fr[1]
+    return (1.0 - fr[0]) * (gy * s00 + fr[1] * s01) + fr[0] * (gy * s10 + fr[1] * s11)
 
 
 @wp.kernel
@@ -113,26 +129,18 @@ def query_kernel(scalar: type, goal_scalar: type) -> wp.Kernel:
             u = wp.vec3(-1.0, -1.0, -1.0)  # NaN/inf point: grid corner value, inside = False
         inside[t] = grid_contains(u, nx, ny, nz)
         b, fr = grid_cell(u, nx, ny, nz)
-        fx = fr[0]
-        fy = fr[1]
-        fz = fr[2]
-        gx = 1.0 - fx
-        gy = 1.0 - fy
-        gz = 1.0 - fz
         o = grid_strides(nx, ny, nz)
-        o1 = o[0]
-        o2 = o[1]
-        o3 = o[2]
-        s00 = gz * wp.vec4(sd[b]) + fz * wp.vec4(sd[b + o3])
-        s01 = gz * wp.vec4(sd[b + o2]) + fz * wp.vec4(sd[b + o2 + o3])
-        s10 = gz * wp.vec4(sd[b + o1]) + fz * wp.vec4(sd[b + o1 + o3])
-        s11 = gz * wp.vec4(sd[b + o1 + o2]) + fz * wp.vec4(sd[b + o1 + o2 + o3])
-        sv = gx * (gy * s00 + fy * s01) + fx * (gy * s10 + fy * s11)
-        f00 = gz * load_f(fd, b) + fz * load_f(fd, b + o3)
-        f01 = gz * load_f(fd, b + o2) + fz * load_f(fd, b + o2 + o3)
-        f10 = gz * load_f(fd, b + o1) + fz * load_f(fd, b + o1 + o3)
-        f11 = gz * load_f(fd, b + o1 + o2) + fz * load_f(fd, b + o1 + o2 + o3)
-        fv = gx * (gy * f00 + fy * f01) + fx * (gy * f10 + fy * f11)
+        x = o[0]
+        y = o[1]
+        z = o[2]
+        sv = trilinear(
+            wp.vec4(sd[b]), wp.vec4(sd[b + z]), wp.vec4(sd[b + y]), wp.vec4(sd[b + y + z]),
+            wp.vec4(sd[b + x]), wp.vec4(sd[b + x + z]), wp.vec4(sd[b + x + y]), wp.vec4(sd[b + x + y + z]), fr,
+        )  # fmt: skip
+        fv = trilinear(
+            load_f(fd, b), load_f(fd, b + z), load_f(fd, b + y), load_f(fd, b + y + z),
+            load_f(fd, b + x), load_f(fd, b + x + z), load_f(fd, b + x + y), load_f(fd, b + x + y + z), fr,
+        )  # fmt: skip
         out[t] = vec7(fv[0], fv[1], fv[2], sv[0], sv[1], sv[2], sv[3])
 
     return query

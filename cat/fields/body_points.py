@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import torch
 import warp as wp
 
-from cat.fields._bank_kernel import block_address, grid_cell, grid_contains, grid_strides
+from cat.fields._bank_kernel import block_address, grid_cell, grid_contains, grid_strides, trilinear
 
 
 @dataclass
@@ -92,22 +92,16 @@ def min_sdf_kernel(scalar: type, channels: int = 4) -> wp.Kernel:
     scene_bytes = wp.types.type_size_in_bytes(v4)
 
     @wp.func
-    def trilinear_d(
-        sd: wp.array(dtype=v4), u: wp.vec3, nx: int, ny: int, nz: int, o1: int, o2: int, o3: int
-    ) -> wp.float32:
+    def trilinear_d(sd: wp.array(dtype=v4), u: wp.vec3, nx: int, ny: int, nz: int, o: wp.vec3i) -> wp.float32:
         """d at continuous grid index ``u``: the bank query's interpolation (voxel centres, clamp to edge)."""
         b, fr = grid_cell(u, nx, ny, nz)
-        fx = fr[0]
-        fy = fr[1]
-        fz = fr[2]
-        gx = 1.0 - fx
-        gy = 1.0 - fy
-        gz = 1.0 - fz
-        s00 = gz * float(sd[b][0]) + fz * float(sd[b + o3][0])
-        s01 = gz * float(sd[b + o2][0]) + fz * float(sd[b + o2 + o3][0])
-        s10 = gz * float(sd[b + o1][0]) + fz * float(sd[b + o1 + o3][0])
-        s11 = gz * float(sd[b + o1 + o2][0]) + fz * float(sd[b + o1 + o2 + o3][0])
-        return gx * (gy * s00 + fy * s01) + fx * (gy * s10 + fy * s11)
+        x = o[0]
+        y = o[1]
+        z = o[2]
+        return trilinear(
+            float(sd[b][0]), float(sd[b + z][0]), float(sd[b + y][0]), float(sd[b + y + z][0]),
+            float(sd[b + x][0]), float(sd[b + x + z][0]), float(sd[b + x + y][0]), float(sd[b + x + y + z][0]), fr,
+        )  # fmt: skip
 
     @wp.kernel(module="unique")
     def min_sdf(
@@ -157,9 +151,6 @@ def min_sdf_kernel(scalar: type, channels: int = 4) -> wp.Kernel:
         org = scene_origin[s]
         inv = scene_inv_voxel[s]
         o = grid_strides(nx, ny, nz)
-        o1 = o[0]
-        o2 = o[1]
-        o3 = o[2]
         for b in range(b0, b1):
             q = body_quat[w * num_bodies + b]  # (w, x, y, z), unit
             qw = q[0]
@@ -187,13 +178,13 @@ def min_sdf_kernel(scalar: type, channels: int = 4) -> wp.Kernel:
                         ez = wp.max(wp.max(-u[2], u[2] - float(nz)), 0.0)
                         d = wp.sqrt(ex * ex + ey * ey + ez * ez) / inv
                         if d == 0.0:
-                            d = trilinear_d(sd, u, nx, ny, nz, o1, o2, o3)
+                            d = trilinear_d(sd, u, nx, ny, nz, o)
                         if d >= cull[g]:
                             k1 = k0
                 for k in range(k0, k1):
                     u = (pos + rot * points[k] - org) * inv
                     if grid_contains(u, nx, ny, nz):  # also False for NaN: a non-finite point is clear
-                        best = wp.min(best, trilinear_d(sd, u, nx, ny, nz, o1, o2, o3) - off)
+                        best = wp.min(best, trilinear_d(sd, u, nx, ny, nz, o) - off)
             out[w * num_bodies + b] = best
 
     return min_sdf

@@ -91,3 +91,24 @@ def test_runs_queued_past_the_sittings_end_are_left_for_the_next(tmp_path, caplo
     assert not (tmp_path / "exps/sit/runs/b/seed1").exists() and not (tmp_path / "exps/sit/runs/b/seed2").exists()
     assert caplog.text.count("deadline passed before the run started") == 2
     assert "ran a@0; left a@0, b@1, b@2" in caplog.text
+
+
+def test_two_sittings_on_other_cells_keep_each_others_records(tmp_path, caplog):
+    """Sitting A reads the state, sitting B (another cell) runs and records its run, then A runs and writes: the
+    state keeps both records (A merges entry by entry instead of writing back what it read)."""
+    from cat.experiment.runner import ExperimentCfg, Runner
+
+    exp = tmp_path / "sit.yaml"
+    cells = {"a": {"task": "flat", "iterations": 1}, "b": {"task": "flat", "iterations": 1}}
+    exp.write_text(yaml.safe_dump({"common": COMMON, "cells": cells}))
+    root = tmp_path / "exps"
+    first = Runner(ExperimentCfg(experiment=str(exp), only=["a"], root=str(root)), [])  # reads the empty state
+    mod = load_script(REPO / "scripts" / "experiment.py")
+    with caplog.at_level(logging.INFO):
+        assert mod.main([f"experiment={exp}", f"root={root}", "only=[b]"]) == 0
+        b = json.loads((root / "sit" / "state.json").read_text())["units"]["b@0"]
+        assert b["status"] == "done"
+        assert first.run() == 0
+    units = json.loads((root / "sit" / "state.json").read_text())["units"]
+    assert units["b@0"] == b  # B's record survives A's write, unchanged
+    assert units["a@0"]["status"] == "done" and units["a@0"]["checkpoint"].endswith("model_0.pt")

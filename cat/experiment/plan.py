@@ -19,6 +19,7 @@ import dataclasses
 import hashlib
 import json
 import math
+import os
 import re
 import typing
 from dataclasses import dataclass, field
@@ -187,6 +188,7 @@ class Plan:
                     unit = self._unit(exp.cells[name], seed)
                     self.units[unit.key] = unit
         self.state = self.read_state()
+        self._read = copy.deepcopy(self.state)  # as read: what this process has not changed since
 
     # -- units -------------------------------------------------------------------------------------------------
     def _unit(self, cell: Cell, seed: int) -> Unit:
@@ -275,10 +277,20 @@ class Plan:
         return state
 
     def write_state(self) -> None:
+        """Write the state, merged entry by entry with the file as it is now: an entry this process has not
+        changed since it read the file is taken from the file, so two sittings of one experiment on different
+        cells (``only=``, two machines on a shared disk) do not drop each other's records."""
+        now = self.read_state()
+        for section in ("units", "tables"):
+            mine, read = self.state[section], self._read[section]
+            for key, entry in now[section].items():
+                if key not in mine or mine[key] == read.get(key):
+                    mine[key] = entry
         self.folder.mkdir(parents=True, exist_ok=True)
-        tmp = self.folder / (STATE_FILE + ".tmp")
+        tmp = self.folder / f"{STATE_FILE}.{os.getpid()}.tmp"
         tmp.write_text(json.dumps(self.state, indent=1, sort_keys=True))
         tmp.replace(self.folder / STATE_FILE)
+        self._read = copy.deepcopy(self.state)
 
     def minutes_used(self, unit: Unit) -> float:
         return float(self.state["units"].get(unit.key, {}).get("minutes", 0.0))

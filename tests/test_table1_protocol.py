@@ -176,3 +176,20 @@ def test_each_rows_column_cell_builds_and_steps(tmp_path, row, column):
     env = make_env(cfg)
     env.step(torch.zeros(env.num_envs, env.num_actions))
     assert env.cfg.scene_kind == column and env.curriculum is not None
+
+
+@pytest.mark.parametrize("cell,shipped", [("spec_side_crouch", "side_crouch"), ("spec_hurdle_pass", "hurdle_pass")])
+def test_a_continued_specialist_adopts_its_shipped_run(tmp_path, cell, shipped):
+    """The cells that continue a shipped specialist are its own recipe: its folder copied in is adopted and
+    resumes from its last checkpoint (not a fresh run, not a stale one)."""
+    import shutil
+
+    plan = Plan(load_experiment("table1"), str(tmp_path))
+    unit = plan.units[f"{cell}@0"]
+    src = EXPERIMENT.parents[2] / "checkpoints" / shipped
+    latest = max(src.glob("model_*.pt"), key=lambda p: int(p.stem.split("_")[1]))
+    unit.run_dir.mkdir(parents=True)
+    for name in ("config.yaml", latest.name):
+        shutil.copy(src / name, unit.run_dir / name)
+    assert plan.status(unit) == "resume"
+    assert int(latest.stem.split("_")[1]) < unit.final - 1

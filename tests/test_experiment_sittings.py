@@ -112,3 +112,46 @@ def test_two_sittings_on_other_cells_keep_each_others_records(tmp_path, caplog):
     units = json.loads((root / "sit" / "state.json").read_text())["units"]
     assert units["b@0"] == b  # B's record survives A's write, unchanged
     assert units["a@0"]["status"] == "done" and units["a@0"]["checkpoint"].endswith("model_0.pt")
+
+
+def test_a_run_held_by_a_live_sitting_is_left_to_it(tmp_path, caplog):
+    """A run another live sitting trains (its record in state.json) is neither started nor wiped by a second
+    sitting; once that sitting is gone (its process dead, or on another host its end passed) it is trained."""
+    import socket
+    import subprocess
+    import sys
+
+    from cat.experiment.plan import Plan
+    from cat.experiment.spec import load_experiment
+
+    exp = tmp_path / "sit.yaml"
+    exp.write_text(yaml.safe_dump({"common": COMMON, "cells": {"a": {"task": "flat", "iterations": 1}}}))
+    root = tmp_path / "exps"
+    state = root / "sit" / "state.json"
+    state.parent.mkdir(parents=True)
+    other = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(120)"])
+    try:
+        held = {"host": socket.gethostname(), "pid": other.pid, "until": None}
+        state.write_text(json.dumps({"units": {"a@0": {"sitting": held}}, "tables": {}}))
+        run_dir = root / "sit" / "runs" / "a" / "seed0"
+        run_dir.mkdir(parents=True)  # the other sitting's run, before its first checkpoint
+        mod = load_script(REPO / "scripts" / "experiment.py")
+        with caplog.at_level(logging.INFO):
+            assert mod.main([f"experiment={exp}", f"root={root}"]) == 0
+        assert f"a@0 is being trained by the sitting of pid {other.pid}" in caplog.text
+        assert run_dir.is_dir() and not list(run_dir.iterdir())  # neither wiped nor trained into
+        assert json.loads(state.read_text())["units"]["a@0"]["sitting"] == held  # its record kept
+    finally:
+        other.kill()
+        other.wait()
+    caplog.clear()
+    with caplog.at_level(logging.INFO):
+        assert mod.main([f"experiment={exp}", f"root={root}"]) == 0
+    assert (run_dir / "model_0.pt").is_file()
+    assert "sitting" not in json.loads(state.read_text())["units"]["a@0"]  # released when its stage ended
+    # on another host the record's end decides
+    plan = Plan(load_experiment(str(exp)), str(root))
+    for until, holds in ((time.time() + 600, True), (time.time() - 1, False), (None, True)):
+        held = {"host": "elsewhere", "pid": 1, "until": until}
+        state.write_text(json.dumps({"units": {"a@0": {"sitting": held}}, "tables": {}}))
+        assert (plan.holder(plan.units["a@0"]) is not None) == holds, until

@@ -21,6 +21,8 @@ import json
 import math
 import os
 import re
+import socket
+import time
 import typing
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -291,6 +293,36 @@ class Plan:
         tmp.write_text(json.dumps(self.state, indent=1, sort_keys=True))
         tmp.replace(self.folder / STATE_FILE)
         self._read = copy.deepcopy(self.state)
+
+    def hold(self, unit: Unit, until: float | None) -> None:
+        """Mark the unit as trained by this sitting (host, pid, its end as Unix time or None) until :meth:`release`."""
+        entry = self.state["units"].setdefault(unit.key, {})
+        entry["sitting"] = {"host": socket.gethostname(), "pid": os.getpid(), "until": until}
+
+    def release(self, unit: Unit) -> None:
+        self.state["units"].get(unit.key, {}).pop("sitting", None)
+
+    def holder(self, unit: Unit) -> str | None:
+        """Who else trains the unit now, from the state file as it is: another live process on this host, or a
+        sitting on another host whose end has not passed (one without an end holds until its record is removed);
+        None when nobody does."""
+        held = self.read_state()["units"].get(unit.key, {}).get("sitting")
+        if not held:
+            return None
+        host, pid, until = held.get("host"), int(held.get("pid", 0)), held.get("until")
+        if host == socket.gethostname():
+            if pid == os.getpid():
+                return None
+            try:
+                os.kill(pid, 0)
+            except ProcessLookupError:
+                return None  # that sitting is gone (killed before it could release)
+            except PermissionError:
+                pass  # alive, another user's
+        elif until is not None and until < time.time():
+            return None
+        end = "" if until is None else f" until {time.strftime('%H:%M', time.localtime(until))}"
+        return f"the sitting of pid {pid} on {host}{end}"
 
     def minutes_used(self, unit: Unit) -> float:
         return float(self.state["units"].get(unit.key, {}).get("minutes", 0.0))

@@ -70,6 +70,8 @@ class Runner:
                     left += 0 if unit.timed else unit.final - done
                 elif status != "done":
                     left += 0 if unit.timed else unit.final
+                if by := self.plan.holder(unit):
+                    shown += f", being trained by {by}"
                 lines.append(f"[stage {k}] {unit.key} ({shown}) -> {unit.checkpoint()}")
                 if status == "stale":
                     lines.append(f"  # changed since its run: {self.plan.changes(unit)}")
@@ -111,8 +113,11 @@ class Runner:
                 blocked = [u for u in units if not self._inputs_ready(u)]
                 if blocked:
                     log.warning("stage %d: %s wait for unfinished inputs", k, ", ".join(u.key for u in blocked))
+                held = {u.key: h for u in units if u not in blocked and (h := self.plan.holder(u))}
+                for key, by in held.items():
+                    log.warning("stage %d: %s is being trained by %s: left to it", k, key, by)
                 # seed-major: a sitting trains seed 0 of every cell before any seed 1 (a column first stands whole)
-                ready = sorted((u for u in units if u not in blocked), key=lambda u: u.seed)
+                ready = sorted((u for u in units if u not in blocked and u.key not in held), key=lambda u: u.seed)
                 if ready:
                     self._train_stage(k, ready, left)
                 bar.update(len(ready))
@@ -171,12 +176,14 @@ class Runner:
             log.info("stage %d: %s: %s", k, unit.key, _cmd("train", job))
             entry = self.plan.state["units"].setdefault(unit.key, {})
             entry.update(hash=unit.hash, run_dir=str(unit.run_dir), cell=unit.cell.name, seed=unit.seed)
+            self.plan.hold(unit, deadline)  # another sitting leaves it alone until released
         self.plan.write_state()  # before launching: a sitting killed mid-stage still resumes its runs
         before = [self._latest(u) for u in units]
         t0 = time.monotonic()
         results = launch(SCRIPTS / "train.py", jobs, self._hydra(f"stage{k}"), name=f"{self.exp.name}-stage{k}")
         stage_minutes = (time.monotonic() - t0) / 60.0
         for unit, result, prior in zip(units, results, before, strict=True):
+            self.plan.release(unit)
             entry = self.plan.state["units"][unit.key]
             entry["minutes"] = entry.get("minutes", 0.0) + (stage_minutes if result.minutes is None else result.minutes)
             status = self.plan.status(unit) if result.code == 0 else "failed"

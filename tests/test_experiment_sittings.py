@@ -154,4 +154,4 @@ def test_a_run_held_by_a_live_sitting_is_left_to_it(tmp_path, caplog):
     for until, holds in ((time.time() + 600, True), (time.time() - 1, False), (None, True)):
         held = {"host": "elsewhere", "pid": 1, "until": until}
         state.write_text(json.dumps({"units": {"a@0": {"sitting": held}}, "tables": {}}))
-        assert (plan.holder(plan.units["a@0"]) is not None) == holds, until
+        assert ("a@0" in plan.holders([plan.units["a@0"]])) == holds, until

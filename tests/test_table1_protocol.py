@@ -184,12 +184,14 @@ def test_a_continued_specialist_adopts_its_shipped_run(tmp_path, cell, shipped):
     resumes from its last checkpoint (not a fresh run, not a stale one)."""
     import shutil
 
+    from cat.experiment.plan import latest_checkpoint
+
     plan = Plan(load_experiment("table1"), str(tmp_path))
     unit = plan.units[f"{cell}@0"]
     src = EXPERIMENT.parents[2] / "checkpoints" / shipped
-    latest = max(src.glob("model_*.pt"), key=lambda p: int(p.stem.split("_")[1]))
+    it, latest = latest_checkpoint(src)
     unit.run_dir.mkdir(parents=True)
     for name in ("config.yaml", latest.name):
         shutil.copy(src / name, unit.run_dir / name)
     assert plan.status(unit) == "resume"
-    assert int(latest.stem.split("_")[1]) < unit.final - 1
+    assert it < unit.final - 1

@@ -59,6 +59,25 @@ of the keys added since that reproduce its judgement: a recorded hash of one of 
 STATE_FILE = "state.json"
 
 
+def _live_sitting(held: dict) -> str | None:
+    """A ``"sitting"`` record (host, pid, end) -> who it is while that sitting may still run, else None (this
+    process; a process gone from this host; another host's sitting whose end has passed)."""
+    host, pid, until = held.get("host"), int(held.get("pid", 0)), held.get("until")
+    if host == socket.gethostname():
+        if pid == os.getpid():
+            return None
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            return None  # that sitting is gone (killed before it could release)
+        except PermissionError:
+            pass  # alive, another user's
+    elif until is not None and until < time.time():
+        return None
+    end = "" if until is None else f" until {time.strftime('%H:%M', time.localtime(until))}"
+    return f"the sitting of pid {pid} on {host}{end}"
+
+
 def latest_checkpoint(run_dir: Path) -> tuple[int, Path] | None:
     """The highest ``model_<it>.pt`` of a run folder."""
     found = []
@@ -302,27 +321,16 @@ class Plan:
     def release(self, unit: Unit) -> None:
         self.state["units"].get(unit.key, {}).pop("sitting", None)
 
-    def holder(self, unit: Unit) -> str | None:
-        """Who else trains the unit now, from the state file as it is: another live process on this host, or a
-        sitting on another host whose end has not passed (one without an end holds until its record is removed);
-        None when nobody does."""
-        held = self.read_state()["units"].get(unit.key, {}).get("sitting")
-        if not held:
-            return None
-        host, pid, until = held.get("host"), int(held.get("pid", 0)), held.get("until")
-        if host == socket.gethostname():
-            if pid == os.getpid():
-                return None
-            try:
-                os.kill(pid, 0)
-            except ProcessLookupError:
-                return None  # that sitting is gone (killed before it could release)
-            except PermissionError:
-                pass  # alive, another user's
-        elif until is not None and until < time.time():
-            return None
-        end = "" if until is None else f" until {time.strftime('%H:%M', time.localtime(until))}"
-        return f"the sitting of pid {pid} on {host}{end}"
+    def holders(self, units: list[Unit]) -> dict[str, str]:
+        """Who else trains each of ``units`` now, by unit key, from the state file as it is (read once): another
+        live process on this host, or a sitting on another host whose end has not passed (one without an end holds
+        until its record is removed). Units nobody else trains are left out."""
+        records = self.read_state()["units"]
+        out = {}
+        for unit in units:
+            if (held := records.get(unit.key, {}).get("sitting")) and (by := _live_sitting(held)):
+                out[unit.key] = by
+        return out
 
     def minutes_used(self, unit: Unit) -> float:
         return float(self.state["units"].get(unit.key, {}).get("minutes", 0.0))

@@ -60,6 +60,7 @@ class Runner:
         if self.exp.note:
             lines.append(f"  {self.exp.note}")
         left = 0  # iterations still to train over the units shown
+        held = self.plan.holders(self.plan.units_of(self.cells))
         for k, stage in enumerate(self.plan.stages):
             for unit in self.plan.units_of([c for c in stage if c in self.cells]):
                 status = self.plan.status(unit)
@@ -70,8 +71,8 @@ class Runner:
                     left += 0 if unit.timed else unit.final - done
                 elif status != "done":
                     left += 0 if unit.timed else unit.final
-                if by := self.plan.holder(unit):
-                    shown += f", being trained by {by}"
+                if unit.key in held:
+                    shown += f", being trained by {held[unit.key]}"
                 lines.append(f"[stage {k}] {unit.key} ({shown}) -> {unit.checkpoint()}")
                 if status == "stale":
                     lines.append(f"  # changed since its run: {self.plan.changes(unit)}")
@@ -113,7 +114,7 @@ class Runner:
                 blocked = [u for u in units if not self._inputs_ready(u)]
                 if blocked:
                     log.warning("stage %d: %s wait for unfinished inputs", k, ", ".join(u.key for u in blocked))
-                held = {u.key: h for u in units if u not in blocked and (h := self.plan.holder(u))}
+                held = self.plan.holders([u for u in units if u not in blocked])
                 for key, by in held.items():
                     log.warning("stage %d: %s is being trained by %s: left to it", k, key, by)
                 # seed-major: a sitting trains seed 0 of every cell before any seed 1 (a column first stands whole)

@@ -391,3 +391,40 @@ def test_every_hashed_train_key_is_recorded():
     assert not hashed - recorded, f"TrainCfg keys not in NEUTRAL_DEFAULTS nor recorded: {sorted(hashed - recorded)}"
     assert not recorded - hashed, f"recorded keys TrainCfg no longer has: {sorted(recorded - hashed)}"
     assert ("algo", "rehearsal") in NEUTRAL_DEFAULTS  # rehearsal off is plain PPO, what runs before it did
+
+
+def test_a_shipped_run_is_restored_in_a_fresh_clone_and_another_recipes_is_not(tmp_path, caplog, capsys):
+    """experiments/ is not committed: a run shipped to <shipped>/<experiment>/<cell>/seed<k> is copied back into a
+    fresh experiments folder (done, not trained again) and its downstream cell starts from it; a shipped folder of
+    another recipe is left alone and that cell trains anew."""
+    from cat.experiment.plan import Plan
+    from cat.experiment.spec import load_experiment
+
+    cells = {"prior": {"task": "flat", "iterations": 2}, "other": {"task": "flat", "iterations": 1}}
+    path = tmp_path / "exp.yaml"
+    spec = {"common": COMMON, "cells": cells, "shipped": str(tmp_path / "shipped")}
+    path.write_text(yaml.safe_dump(spec))
+    plan = Plan(load_experiment(str(path)), str(tmp_path / "first"))
+    train, ship = load_script(REPO / "scripts" / "train.py"), load_script(REPO / "scripts" / "ship.py")
+    for name, extra in (("prior", []), ("other", ["algo.entropy_coef=0.01"])):  # "other": not its recipe
+        unit = plan.units[f"{name}@0"]
+        run = unit.run_dir
+        assert train.main([*plan.fresh_overrides(unit), *extra]) == 0
+        assert ship.main([f"checkpoint={run}", f"out={tmp_path / 'shipped/exp' / name / 'seed0'}"]) == 0
+    shipped = (tmp_path / "shipped/exp/prior/seed0/model_1.pt").read_bytes()
+
+    cells["next"] = {"task": "flat", "init": "prior", "iterations": 1}
+    path.write_text(yaml.safe_dump(spec))
+    args = [f"experiment={path}", f"root={tmp_path / 'exps'}"]
+    code, _ = _experiment([*args, "dry_run=true"], caplog)
+    out = capsys.readouterr().out
+    assert code == 0 and f"prior@0 (restore {tmp_path / 'shipped/exp/prior/seed0'}: done)" in out
+    assert "other@0 (run)" in out and not (tmp_path / "exps").exists()
+    code, errors = _experiment(args, caplog)
+    assert code == 0 and not errors
+    assert "ran other@0, next@0; left nothing" in _summary(caplog)
+    assert "other@0: " in caplog.text and "is another recipe's run: not restored" in caplog.text
+    run = tmp_path / "exps/exp/runs"
+    assert (run / "prior/seed0/model_1.pt").read_bytes() == shipped  # the shipped file, not a retrained one
+    assert not (run / "prior/seed0/model_0.pt").exists()
+    assert yaml.safe_load((run / "next/seed0/config.yaml").read_text())["init"] == str(run / "prior/seed0/model_1.pt")

@@ -336,12 +336,14 @@ class Plan:
         return float(self.state["units"].get(unit.key, {}).get("minutes", 0.0))
 
     @staticmethod
-    def run_config(unit: Unit):
-        """The TrainCfg of the run in the unit's folder (its latest checkpoint's), None without a readable one."""
+    def run_config(unit: Unit, folder: Path | None = None):
+        """The TrainCfg of the run in the unit's folder (or ``folder``: a shipped copy), its latest checkpoint's;
+        None without a readable one."""
         from cat.learning.runs import load_run_config
 
-        latest = latest_checkpoint(unit.run_dir)
-        if latest is None or not (unit.run_dir / "config.yaml").is_file():
+        folder = folder or unit.run_dir
+        latest = latest_checkpoint(folder)
+        if latest is None or not (folder / "config.yaml").is_file():
             return None
         try:
             return load_run_config(latest[1])
@@ -361,10 +363,11 @@ class Plan:
         more = f" and {len(diffs) - limit} more" if len(diffs) > limit else ""
         return "; ".join(diffs[:limit]) + more
 
-    def adoptable(self, unit: Unit) -> bool:
-        """A run that the state does not know (its printed command run by hand, e.g. under torchrun) is the
-        unit's when its config.yaml is the unit's config at the leg it stands in, with the expected inputs."""
-        raw = self.run_config(unit)
+    def adoptable(self, unit: Unit, folder: Path | None = None) -> bool:
+        """A run that the state does not know (its printed command run by hand, e.g. under torchrun; ``folder``: a
+        shipped copy) is the unit's when its config.yaml is the unit's config at the leg it stands in, with the
+        expected inputs."""
+        raw = self.run_config(unit, folder)
         if raw is None:  # none, or an unreadable or foreign config: not this unit's run
             return False
         try:

@@ -15,6 +15,7 @@ import yaml
 from tqdm import tqdm
 
 from cat.experiment.plan import Plan, Unit
+from cat.experiment.restore import restorable, restore_shipped
 from cat.experiment.spec import ExperimentError, load_experiment
 from cat.launcher import check_launcher, launch
 
@@ -65,7 +66,13 @@ class Runner:
             for unit in self.plan.units_of([c for c in stage if c in self.cells]):
                 status = self.plan.status(unit)
                 shown = status
-                if status == "resume":
+                shipped = restorable(self.plan, unit) if unit.key not in held else None
+                if shipped is not None:  # what the sitting will copy in before it trains
+                    it, folder = shipped
+                    status = "done" if it + 1 >= unit.final else "resume"
+                    shown = f"restore {folder}: " + ("done" if status == "done" else f"resume from iteration {it + 1}")
+                    left += unit.final - it - 1
+                elif status == "resume":
                     done = self._latest(unit)[0] + 1
                     shown = f"resume from iteration {done}" + ("" if unit.timed else f" of {unit.final}")
                     left += 0 if unit.timed else unit.final - done
@@ -97,9 +104,12 @@ class Runner:
         if self.cfg.dry_run:
             print(self.describe())
             return 0
-        todo = [u for u in self.plan.units_of(self.cells) if self.plan.status(u) != "done"]
+        units = self.plan.units_of(self.cells)
+        held = self.plan.holders(units)
+        restore_shipped(self.plan, [u for u in units if u.key not in held])
+        todo = [u for u in units if self.plan.status(u) != "done"]
         tables = [self.exp.tables[t] for t in self.tables if not self.plan.table_done(self.exp.tables[t])]
-        done_before = len(self.plan.units_of(self.cells)) - len(todo)
+        done_before = len(units) - len(todo)
         log.info("experiment %s: %d run(s) done, %d to train, %d table(s) to build", self.exp.name,
                  done_before, len(todo), len(tables))  # fmt: skip
         with tqdm(total=len(todo) + len(tables), desc=self.exp.name, unit="job") as bar:

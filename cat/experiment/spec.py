@@ -2,6 +2,7 @@
 
 ```yaml
 root: experiments            # optional: the experiment lives in <root>/<name>/ (root= on the command line wins)
+shipped: checkpoints         # optional: a run shipped to <shipped>/<name>/<cell>/seed<k>/ is restored (restore.py)
 common: [sim=mujoco]         # optional: overrides of every cell (scripts/train.py keys)
 cells:
   prior:                     # a cell: one training run per seed
@@ -113,6 +114,7 @@ class Experiment:
     common: list[str] = field(default_factory=list)
     root: str = "experiments"
     note: str = ""
+    shipped: str = "checkpoints"  # shipped runs: <shipped>/<name>/<cell>/seed<k>/ (scripts/ship.py out=)
 
     def cell_of(self, ref: str) -> tuple[str, str | None] | None:
         """``prior`` -> (prior, None) (its final checkpoint); ``prior/model_99.pt`` -> (prior, model_99.pt);
@@ -346,7 +348,7 @@ def load_experiment(name: str) -> Experiment:
     if not path.is_file():
         raise ExperimentError(f"unknown experiment {name!r}; experiments: {', '.join(experiment_names())}")
     raw = yaml.safe_load(path.read_text()) or {}
-    top = ("root", "common", "cells", "tables", "note")
+    top = ("root", "common", "cells", "tables", "note", "shipped")
     for key in raw:
         if key not in top:
             raise ExperimentError(f"experiment {path.stem}: {unknown_key_message(str(key), list(top))}")
@@ -359,6 +361,7 @@ def load_experiment(name: str) -> Experiment:
         common=[str(o) for o in _as_list("common", raw.get("common"))],
         root=str(raw.get("root", "experiments")),
         note=str(raw.get("note", "")),
+        shipped=str(raw.get("shipped", "checkpoints")),
     )
     clash = set(exp.cells) & set(exp.tables)
     if clash:

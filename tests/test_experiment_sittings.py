@@ -155,3 +155,39 @@ def test_a_run_held_by_a_live_sitting_is_left_to_it(tmp_path, caplog):
         held = {"host": "elsewhere", "pid": 1, "until": until}
         state.write_text(json.dumps({"units": {"a@0": {"sitting": held}}, "tables": {}}))
         assert ("a@0" in plan.holders([plan.units["a@0"]])) == holds, until
+
+
+def test_a_run_another_sitting_took_over_keeps_that_sittings_record(tmp_path, caplog, monkeypatch):
+    """A run this sitting stopped early (a signal to its job) may be taken over by a second sitting, with a newer
+    recipe, before this sitting's stage ends: this sitting then leaves the unit's record as the other wrote it
+    (else its older hash would make the next sitting move the newer run aside as stale)."""
+    import socket
+    import subprocess
+    import sys
+
+    import cat.experiment.runner as runner
+
+    exp = tmp_path / "sit.yaml"
+    exp.write_text(yaml.safe_dump({"common": COMMON, "cells": {"a": {"task": "flat", "iterations": 1}}}))
+    state = tmp_path / "exps" / "sit" / "state.json"
+    other = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(120)"])
+    theirs = {"hash": "newer", "sitting": {"host": socket.gethostname(), "pid": other.pid, "until": None}}
+    real = runner.launch
+
+    def launch_then_taken_over(*args, **kwargs):
+        results = real(*args, **kwargs)
+        now = json.loads(state.read_text())
+        now["units"]["a@0"] = theirs
+        state.write_text(json.dumps(now))
+        return results
+
+    monkeypatch.setattr(runner, "launch", launch_then_taken_over)
+    try:
+        mod = load_script(REPO / "scripts" / "experiment.py")
+        with caplog.at_level(logging.INFO):
+            assert mod.main([f"experiment={exp}", f"root={tmp_path / 'exps'}"]) == 0
+        assert f"a@0: now trained by the sitting of pid {other.pid}" in caplog.text
+        assert json.loads(state.read_text())["units"]["a@0"] == theirs
+    finally:
+        other.kill()
+        other.wait()

@@ -193,7 +193,11 @@ class Runner:
         t0 = time.monotonic()
         results = launch(SCRIPTS / "train.py", jobs, self._hydra(f"stage{k}"), name=f"{self.exp.name}-stage{k}")
         stage_minutes = (time.monotonic() - t0) / 60.0
+        taken = self.plan.holders(units)  # a run this sitting stopped early and another sitting took over since
         for unit, result, prior in zip(units, results, before, strict=True):
+            if unit.key in taken:  # its record is that sitting's now (its recipe may be newer than this one's)
+                log.warning("%s: now trained by %s: its record is left to it", unit.key, taken[unit.key])
+                continue
             self.plan.release(unit)
             entry = self.plan.state["units"][unit.key]
             entry["minutes"] = entry.get("minutes", 0.0) + (stage_minutes if result.minutes is None else result.minutes)

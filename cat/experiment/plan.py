@@ -21,14 +21,13 @@ import json
 import math
 import os
 import re
-import socket
-import time
 import typing
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from omegaconf import OmegaConf
 
+from cat.experiment.sitting import live_sitting, this_sitting
 from cat.experiment.spec import BIG_ITERATIONS, Cell, Experiment, ExperimentError, Table
 from cat.learning.hydra_cfg import load_config
 
@@ -57,25 +56,6 @@ FIELD_CONTACT_HASHED = (
 of the keys added since that reproduce its judgement: a recorded hash of one of these forms is the same run
 (physical runs: whatever it held; field runs: when their judgement is that one)."""
 STATE_FILE = "state.json"
-
-
-def _live_sitting(held: dict) -> str | None:
-    """A ``"sitting"`` record (host, pid, end) -> who it is while that sitting may still run, else None (this
-    process; a process gone from this host; another host's sitting whose end has passed)."""
-    host, pid, until = held.get("host"), int(held.get("pid", 0)), held.get("until")
-    if host == socket.gethostname():
-        if pid == os.getpid():
-            return None
-        try:
-            os.kill(pid, 0)
-        except ProcessLookupError:
-            return None  # that sitting is gone (killed before it could release)
-        except PermissionError:
-            pass  # alive, another user's
-    elif until is not None and until < time.time():
-        return None
-    end = "" if until is None else f" until {time.strftime('%H:%M', time.localtime(until))}"
-    return f"the sitting of pid {pid} on {host}{end}"
 
 
 def latest_checkpoint(run_dir: Path) -> tuple[int, Path] | None:
@@ -316,7 +296,7 @@ class Plan:
     def hold(self, unit: Unit, until: float | None) -> None:
         """Mark the unit as trained by this sitting (host, pid, its end as Unix time or None) until :meth:`release`."""
         entry = self.state["units"].setdefault(unit.key, {})
-        entry["sitting"] = {"host": socket.gethostname(), "pid": os.getpid(), "until": until}
+        entry["sitting"] = this_sitting(until)
 
     def release(self, unit: Unit) -> None:
         self.state["units"].get(unit.key, {}).pop("sitting", None)
@@ -328,7 +308,7 @@ class Plan:
         records = self.read_state()["units"]
         out = {}
         for unit in units:
-            if (held := records.get(unit.key, {}).get("sitting")) and (by := _live_sitting(held)):
+            if (held := records.get(unit.key, {}).get("sitting")) and (by := live_sitting(held)):
                 out[unit.key] = by
         return out
 

@@ -62,12 +62,19 @@ def test_the_second_column_continues_each_rows_own_first_column_run():
 
 
 def test_the_dry_run_counts_the_iterations_to_train(tmp_path):
-    """An env-step budget is an iteration count: nothing trained yet, every run of the experiment is left to do."""
+    """An env-step budget is an iteration count: nothing trained or shipped, every run of the experiment is left to
+    do; the shipped runs (restored by the runner) are not."""
+    from cat.experiment.restore import restorable
     from cat.experiment.runner import ExperimentCfg, Runner
 
     runner = Runner(ExperimentCfg(experiment="table1", root=str(tmp_path)), [])
     units = runner.plan.units_of(runner.cells)
     assert {u.final for u in units if u.cell.env_steps} == {1018}  # 25 M env steps / (1,024 envs x 24 steps)
+    shipped = {u.key: found[0] + 1 for u in units if (found := restorable(runner.plan, u))}
+    assert "ours_crouch_pass@0" in shipped  # the column's shipped runs
+    left = sum(u.final - shipped.get(u.key, 0) for u in units)
+    assert runner.describe().endswith(f"to train: {left} iterations (cells with a minutes budget not counted)")
+    runner.exp.shipped = str(tmp_path / "nothing_shipped")
     assert runner.describe().endswith(
         f"to train: {sum(u.final for u in units)} iterations (cells with a minutes budget not counted)"
     )

@@ -35,6 +35,7 @@ import torch
 import trimesh
 
 from cat.envs.config import DomainRandCfg
+from cat.envs.field_contact import add_body_pose_sensors
 from cat.envs.mdp.events import scaled_gains
 from cat.envs.robot import RobotCfg, robot_spec
 from cat.envs.scene import env_spec, model_composer, strip_visual_meshes
@@ -58,7 +59,9 @@ def scene_name(scene: Scene, i: int) -> str:
     return f"scene {i} ({scene.kind!r}, seed {scene.seed})"
 
 
-def build_scene_models(robot: RobotCfg, scenes: Sequence[Scene], group_ratio: float = 1.25) -> list[mujoco.MjModel]:
+def build_scene_models(
+    robot: RobotCfg, scenes: Sequence[Scene], group_ratio: float = 1.25, pose_sensors: bool = False
+) -> list[mujoco.MjModel]:
     """One model per scene (robot + that scene's obstacles in its own frame), padded so that models of one layout
     class share ``MjData`` (see the module docstring). Raises :class:`SceneModelError` naming a scene whose
     state, controls or sensors differ from the first scene's."""
@@ -70,6 +73,8 @@ def build_scene_models(robot: RobotCfg, scenes: Sequence[Scene], group_ratio: fl
         def add(spec: mujoco.MjSpec, scene: Scene = scene) -> None:
             add_obstacles_to_spec(spec, scene, cells=OBSTACLE_CELLS)
             spec.worldbody.add_body(name=PAD_BODY)
+            if pose_sensors:  # body_clearance's body poses (cat.envs.body_clearance)
+                add_body_pose_sensors(spec, robot)
 
         spec = env_spec(robot, add, base=base)
         specs.append(spec)
@@ -173,11 +178,18 @@ class WorldModels:
 
     @classmethod
     def build(
-        cls, robot: RobotCfg, scenes: Sequence[Scene], dr: DomainRandCfg, seed: int = 0, group_ratio: float = 1.25
+        cls,
+        robot: RobotCfg,
+        scenes: Sequence[Scene],
+        dr: DomainRandCfg,
+        seed: int = 0,
+        group_ratio: float = 1.25,
+        pose_sensors: bool = False,
     ) -> WorldModels:
         """Scene models of ``scenes``; with ``dr.enabled`` a pool of ``dr.pool_size`` randomised copies each,
-        their scales drawn from ``dr``'s ranges with a generator of its own (seeded by ``seed``)."""
-        wm = cls(build_scene_models(robot, scenes, group_ratio), robot, dr.pool_size if dr.enabled else 1)
+        their scales drawn from ``dr``'s ranges with a generator of its own (seeded by ``seed``); ``pose_sensors``:
+        every model carries the body pose sensors (``body_clearance``)."""
+        wm = cls(build_scene_models(robot, scenes, group_ratio, pose_sensors), robot, dr.pool_size if dr.enabled else 1)
         if dr.enabled:
             g = torch.Generator().manual_seed(seed + 0x5CE7E)
             shape = (wm.num_scenes, wm.pool)

@@ -17,11 +17,13 @@ from tensordict import TensorDict
 
 from cat.envs import field_source as fsrc
 from cat.envs import snapshot
+from cat.envs.body_clearance import BodyClearance, needs_pose_sensors
 from cat.envs.config import EnvCfg
 from cat.envs.curriculum import DifficultyCurriculum
 from cat.envs.episode_log import episode_log
 from cat.envs.field_contact import (
     FieldContactCfg,
+    add_body_pose_sensors,
     check_obstacles,
     field_contact_for,
     field_model,
@@ -89,16 +91,17 @@ class TraversalEnv(VecEnv):
         rew_terms.heading_gate(cfg.rewards.params.heading_gate)
 
         self.world_models = None  # per-world scene models (scenes.per_world), cat.envs.scene_models
+        poses = needs_pose_sensors(self.observation_groups.uses)  # body_clearance reads the body pose sensors
         if self.obstacles == "field":  # one floor-only model for every world and scene
             models = [field_model(self.robot)]
         elif scenes is not None and scenes.per_world:
             from cat.envs.scene_models import WorldModels
 
             check_backend(sim)  # before the scene models are built
-            self.world_models = WorldModels.build(self.robot, scenes.scenes, cfg.domain_rand, seed)
+            self.world_models = WorldModels.build(self.robot, scenes.scenes, cfg.domain_rand, seed, pose_sensors=poses)
             models = self.world_models.models
         else:
-            models = [build_env_model(self.robot, scenes.add_to_spec if scenes is not None else None)]
+            models = [build_env_model(self.robot, _with_pose_sensors(scenes, self.robot, poses))]
         # pool members (per scene) whose ghost parts stay physical
         pool = self.world_models.pool if self.world_models else 0
         self._physical_members = 0 if self.obstacles == "field" else make_training_ghosts(models, cfg, pool)
@@ -130,6 +133,7 @@ class TraversalEnv(VecEnv):
         )
         self.perception = ScenePerception(cfg.perception, scenes, self.device)
         self.field_contact = field_contact_for(self, model, field_contact)  # None: physical contact sensors
+        self.body_clearance = BodyClearance(self, model) if poses else None
         self._init_buffers(model)
         self.reset_idx(torch.arange(self.num_envs, device=self.device))
         self._compute_obs()
@@ -517,3 +521,17 @@ class TraversalEnv(VecEnv):
     # --- observations ------------------------------------------------------------------------------------
     def _compute_obs(self) -> None:
         self.obs_buf = self.observation_groups.compute(self)
+
+
+def _with_pose_sensors(scenes, robot: RobotCfg, poses: bool):
+    """The spec hook of a single env model: the scenes' obstacles, and the body pose sensors when ``poses``."""
+    add = scenes.add_to_spec if scenes is not None else None
+    if not poses:
+        return add
+
+    def hook(spec) -> None:
+        if add is not None:
+            add(spec)
+        add_body_pose_sensors(spec, robot)
+
+    return hook

@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import torch
 
+from cat.envs.body_clearance import CLEARANCE_CLIP, clearance_bodies
 from cat.envs.math_utils import rotate_yaw_inverse
 from cat.envs.mdp.mirror import AXIAL, FIELD_LINK, POLAR, grid_mirror, joint_mirror, link_mirror
 from cat.envs.mdp.terms import TermNoise, observation_term
@@ -250,6 +251,21 @@ def voxel_grid(env: TraversalEnv) -> torch.Tensor:
 
 
 # --- privileged (critic) terms --------------------------------------------------------------------------
+
+
+@observation_term(
+    lambda task, robot: len(clearance_bodies(robot)),
+    mirror=lambda task, robot: link_mirror(clearance_bodies(robot), ([0], [1.0])),
+    clip=lambda task: CLEARANCE_CLIP,
+    note="per collision body: smallest SDF of its collision shapes [m], clipped to +-clip (privileged: a teacher's "
+    "or critic's input)",
+)
+def body_clearance(env: TraversalEnv) -> torch.Tensor:
+    """How far each collision body is from the nearest obstacle (``cat.envs.body_clearance``): what the 13-link
+    field block does not see (a toe ahead of its ankle, a hand's edge)."""
+    return env.body_clearance.read(env)
+
+
 @observation_term(3, mirror=POLAR, note="root velocity in the yaw frame [m/s] (privileged)")
 def base_lin_vel(env: TraversalEnv) -> torch.Tensor:
     return rotate_yaw_inverse(env.state.yaw, env.state.root_lin_vel)

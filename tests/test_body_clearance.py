@@ -69,3 +69,10 @@ def test_clearance_columns_mirror_left_and_right_bodies():
 def test_clearance_without_scenes_is_refused():
     with pytest.raises(ValueError, match="body_clearance.*scene task"):
         TraversalEnv(clearance_cfg(1))
+
+
+def test_a_policy_reading_clearance_is_not_deployed():
+    from cat.deploy.runtime import _check_deployable
+
+    with pytest.raises(ValueError, match="body_clearance.*does not compute"):
+        _check_deployable(clearance_cfg(1), ["actor"])

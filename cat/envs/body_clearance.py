@@ -5,7 +5,8 @@ until it touches, and most of the generalist's unseen-set failures are contacts 
 deep the unseen-set contacts go"). The ``body_clearance`` observation term gives a policy that sense: per robot
 body with a collision geom, the smallest SDF over its judged shapes, measured as ``sim.obstacles=field`` judges
 contact (:class:`cat.envs.field_contact.FieldContact`: capsule axes and sphere centres at SDF − radius, boxes by
-surface samples) on each scene's contact SDF (exact within 0.1 m of a surface), clipped to ±``CLEARANCE_CLIP``.
+surface samples) on each scene's contact SDF (exact within 0.1 m of a surface), clipped to ±``CLEARANCE_CLIP``;
+on flat ground (no scene) every body reads +``CLEARANCE_CLIP``.
 
 Body poses come from MuJoCo frame sensors, which every env model that needs them carries (``needs_pose_sensors``):
 the field mode's floor-only model always, physical worlds when a group reads ``body_clearance``. A privileged
@@ -53,8 +54,10 @@ class BodyClearance:
     """The ``body_clearance`` reading of an env: one fused SDF query over every env's collision bodies."""
 
     def __init__(self, env: TraversalEnv, model: mujoco.MjModel):
-        if env.scenes is None:
-            raise ValueError(f"observation term {TERM!r} needs a scene task: there is no obstacle to measure")
+        self.width = len(clearance_bodies(env.robot))
+        self.fc: FieldContact | None = None
+        if env.scenes is None:  # flat ground: no obstacle anywhere, every body reads clear (+clip)
+            return
         # the margin sets the cull distance: a body left out of the point query is farther than the clip
         cfg = FieldContactCfg(margin=CLEARANCE_CLIP, substeps=False)
         self.fc = FieldContact(model, env.robot, cfg, env.device)
@@ -69,6 +72,8 @@ class BodyClearance:
 
     def read(self, env: TraversalEnv) -> torch.Tensor:
         """(N, B) clearance of every env's bodies [m], in ``clearance_bodies`` order."""
+        if self.fc is None:
+            return torch.full((env.num_envs, self.width), CLEARANCE_CLIP, device=env.device)
         pos, quat = self.fc.poses(env.sim.sensordata)
         src = env.field_source
         d = self.fc.body_sdf(src.bank, src.field_idx, pos, quat)

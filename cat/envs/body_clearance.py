@@ -8,7 +8,7 @@ contact (:class:`cat.envs.field_contact.FieldContact`: capsule axes and sphere c
 surface samples) on each scene's contact SDF (exact within 0.1 m of a surface), clipped to ±``CLEARANCE_CLIP``;
 on flat ground (no scene) every body reads +``CLEARANCE_CLIP``.
 
-Body poses come from MuJoCo frame sensors, which every env model that needs them carries (``needs_pose_sensors``):
+Body poses come from MuJoCo frame sensors, which every env model that needs them carries:
 the field mode's floor-only model always, physical worlds when a group reads ``body_clearance``. A privileged
 term for now (a teacher's or a critic's input): the deploy runtime does not compute it from a robot's own map.
 """
@@ -20,7 +20,13 @@ from typing import TYPE_CHECKING
 import mujoco
 import torch
 
-from cat.envs.field_contact import FieldContact, FieldContactCfg, fill_contact_sdf
+from cat.envs.field_contact import (
+    FieldContact,
+    FieldContactCfg,
+    collision_geom_ids,
+    fill_contact_sdf,
+    judged_body_ids,
+)
 from cat.envs.robot import RobotCfg, compile_model, robot_spec
 
 if TYPE_CHECKING:
@@ -40,14 +46,8 @@ def clearance_bodies(robot: RobotCfg) -> list[str]:
     key = (robot.model_entry, tuple(robot.collision_geoms))
     if key not in _BODIES:
         model = compile_model(robot_spec(robot, floor=False))
-        ids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, g) for g in robot.collision_geoms]
-        _BODIES[key] = tuple(model.body(b).name for b in dict.fromkeys(int(model.geom_bodyid[g]) for g in ids))
+        _BODIES[key] = tuple(model.body(b).name for b in judged_body_ids(model, collision_geom_ids(model, robot)))
     return list(_BODIES[key])
-
-
-def needs_pose_sensors(env_uses) -> bool:
-    """Whether the env's models must carry the body pose sensors (``env_uses``: ``ObservationGroups.uses``)."""
-    return bool(env_uses(TERM))
 
 
 class BodyClearance:

@@ -103,6 +103,16 @@ def collision_bodies(spec: mujoco.MjSpec, robot: RobotCfg) -> list[str]:
     return [b.name for b in spec.bodies if any(g.name in wanted for g in b.geoms)]
 
 
+def collision_geom_ids(model: mujoco.MjModel, robot: RobotCfg) -> list[int]:
+    """Ids of ``robot.collision_geoms`` in ``model``, in the yaml's order."""
+    return [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, g) for g in robot.collision_geoms]
+
+
+def judged_body_ids(model: mujoco.MjModel, geoms: Sequence[int]) -> list[int]:
+    """The bodies carrying ``geoms``, each once, ordered by its first geom: :class:`FieldContact`'s body order."""
+    return list(dict.fromkeys(int(model.geom_bodyid[g]) for g in geoms))
+
+
 def add_body_pose_sensors(spec: mujoco.MjSpec, robot: RobotCfg) -> None:
     """World position and orientation sensors of every robot body with a collision geom (field contact)."""
     xbody = mujoco.mjtObj.mjOBJ_XBODY
@@ -232,8 +242,8 @@ class FieldContact:
         if cfg.sdf not in CONTACT_SDFS:
             raise ValueError(f"sim.field_contact.sdf={cfg.sdf!r}; valid: {', '.join(CONTACT_SDFS)}")
         self.cfg, self.device = cfg, torch.device(device)
-        geoms = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, g) for g in robot.collision_geoms]
-        body_ids = list(dict.fromkeys(int(model.geom_bodyid[g]) for g in geoms))
+        geoms = collision_geom_ids(model, robot)
+        body_ids = judged_body_ids(model, geoms)
         self.bodies = [model.body(b).name for b in body_ids]
         f32 = dict(dtype=torch.float32, device=self.device)
         pts, offsets, centres, radii = [], [], [], []

@@ -17,7 +17,8 @@ from tensordict import TensorDict
 
 from cat.envs import field_source as fsrc
 from cat.envs import snapshot
-from cat.envs.body_clearance import BodyClearance, needs_pose_sensors
+from cat.envs.body_clearance import TERM as CLEARANCE_TERM
+from cat.envs.body_clearance import BodyClearance
 from cat.envs.config import EnvCfg
 from cat.envs.curriculum import DifficultyCurriculum
 from cat.envs.episode_log import episode_log
@@ -91,7 +92,7 @@ class TraversalEnv(VecEnv):
         rew_terms.heading_gate(cfg.rewards.params.heading_gate)
 
         self.world_models = None  # per-world scene models (scenes.per_world), cat.envs.scene_models
-        poses = needs_pose_sensors(self.observation_groups.uses)  # body_clearance reads the body pose sensors
+        poses = self.observation_groups.uses(CLEARANCE_TERM)  # body_clearance reads the body pose sensors
         if self.obstacles == "field":  # one floor-only model for every world and scene
             models = [field_model(self.robot)]
         elif scenes is not None and scenes.per_world:

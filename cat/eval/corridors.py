@@ -7,7 +7,8 @@ the start still connects to the goal, in two floor models:
 
 * ``walk``: the scene generators' 2.5-D model (``cat.terrain.voxel.walkable``: low obstacles may be stepped over,
   high ones crouched under), eroded by the radius;
-* ``upright``: only columns free from the floor to ``height`` (no hurdle, no crouch), eroded by the radius.
+* ``upright``: only columns free from the floor to ``height`` (no hurdle, no crouch), eroded by the radius: the
+  start rule's ``standing_mask`` at that radius.
 
 The goal counts as reached when the start's component comes within ``goal_window`` of it: a goal next to
 furniture (its own column eroded away at larger radii) is the goal's standing radius, measured apart
@@ -27,7 +28,7 @@ from tqdm import tqdm
 
 from cat.cli import Script, dataclass_loader
 from cat.terrain import Scene
-from cat.terrain.voxel import ReachCfg, walkable
+from cat.terrain.voxel import ReachCfg, standing_mask, walkable
 
 RADII = (0.10, 0.14, 0.18, 0.22, 0.26, 0.30)
 """m: the body radii tried (0.10: the reachability rule's; 0.30: a 0.6 m corridor, room for the G1 walking)."""
@@ -42,25 +43,17 @@ class CorridorCfg:
     height: float = 1.35  # m: the free height of an ``upright`` column (the G1 upright: ~1.32 m)
 
 
-def _disk(radius: float, voxel: float) -> np.ndarray:
-    n = int(np.ceil(radius / voxel))
-    yy, xx = np.mgrid[-n : n + 1, -n : n + 1]
-    return (xx**2 + yy**2) <= (radius / voxel) ** 2 + 1e-9
-
-
 class SceneCorridors:
     """The eroded floor masks of one scene at every radius, in both floor models (built once, queried per trial)."""
 
     def __init__(self, scene: Scene, cfg: CorridorCfg | None = None):
         self.cfg = cfg or CorridorCfg()
         occ, self.grid = scene.occupancy(), scene.grid()
-        v = self.grid.voxel
-        free = ~occ[:, :, : max(int(np.ceil(self.cfg.height / v)), 1)].any(axis=2)
         eight = np.ones((3, 3), dtype=bool)
         self.labels = {}
         for r in self.cfg.radii:
             walk = walkable(occ, self.grid, ReachCfg(body_radius=r))
-            upright = ~ndimage.binary_dilation(~free, structure=_disk(r, v))
+            upright = standing_mask(occ, self.grid.voxel, self.cfg.height, r)
             self.labels[("walk", r)] = ndimage.label(walk, structure=eight)[0]
             self.labels[("upright", r)] = ndimage.label(upright, structure=eight)[0]
 

@@ -6,6 +6,8 @@ Optional: ``record=rollout.rrd`` (rerun replay of world 0), ``seed=`` (start pos
 ``contacts=true`` (then a line naming the body that touched first: ``first_contact=<body>:<trials>,...``),
 ``clearance=true`` (then the success rate if contacts shallower than 1 / 2 / 4 cm were ignored:
 ``tolerant_success=1cm:<x>,2cm:<x>,4cm:<x> deepest_mm_median=<x> contact_trials=<n>``),
+``falls=true`` (then ``falls=<n>/<N> fall_time_s=<q25>/<median>/<q75> fall_progress_median=<x>
+falls_without_contact=<k>``: when the falls came, how far along the way, how many before any contact),
 ``warmup=true`` (the run's training-only warm-up scenes instead of the paper's: where its curriculum stands).
 Prints one line: ``episodes=<n> success_rate=<x> distance_error=<m> collision_rate=<x> fall_rate=<x>``.
 """
@@ -18,6 +20,7 @@ from cat.cli import Script, dataclass_loader, run
 from cat.envs.scene_set import SceneSetError
 from cat.envs.trial_metrics import summarize
 from cat.eval.contacts import clearance_line, contact_line
+from cat.eval.falls import falls_line
 from cat.learning.play import PlayCfg, play_trials, scene_lines
 from cat.learning.runs import CheckpointError
 
@@ -30,6 +33,8 @@ def _job(cfg: PlayCfg) -> int:
         print(contact_line(played.first_contacts))
     if played.clearance is not None:
         print(clearance_line(played.results, played.clearance))
+    if played.falls is not None:
+        print(falls_line(played.results, played.falls))
     print(summarize(played.results).line())
     return 0
 

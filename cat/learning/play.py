@@ -17,6 +17,7 @@ from tqdm import tqdm
 
 from cat.envs.trial_metrics import Summary, TrialResult, summarize
 from cat.eval.contacts import Clearance, FirstContacts
+from cat.eval.falls import Falls
 from cat.eval.runner import EvalCfg, make_eval_env, run_scene_group, run_trials
 from cat.eval.trials import Trial, first_trials, flat_trials, scene_trials
 from cat.learning.runs import load_run_config, resolve_checkpoint
@@ -43,17 +44,20 @@ class PlayCfg:
     warmup: bool = False  # the run's training-only warm-up scenes (d < 0) instead: curriculum progress, diagnostic
     contacts: bool = False  # scripts/play.py also prints which body touched first (cat.eval.contacts)
     clearance: bool = False  # ... and the success rate at contact-depth tolerances (cat.eval.contacts.Clearance)
+    falls: bool = False  # scripts/play.py also prints when the falls came and how far along (cat.eval.falls)
 
 
 class Played(NamedTuple):
     """What ``play_trials`` returns: the trials, their results in order, the evaluated scenes (``None`` on flat
-    ground), and with the options each trial's first-contact bodies and its clearance [m] (else ``None``)."""
+    ground), and with the options each trial's first-contact bodies, its clearance [m] and its fall record
+    (``cat.eval.falls.Falls.records``; else ``None``)."""
 
     trials: list[Trial]
     results: list[TrialResult]
     scenes: list[Scene] | None
     first_contacts: list[str | None] | None = None
     clearance: list[float] | None = None
+    falls: list[tuple[float, float, bool]] | None = None
 
 
 def play(cfg: PlayCfg) -> Summary:
@@ -109,6 +113,9 @@ def play_trials(cfg: PlayCfg) -> Played:
     if cfg.clearance:
         clearance = Clearance(env)
         hooks.append(clearance.on_step)
+    if cfg.falls:
+        falls = Falls(env)
+        hooks.append(falls.on_step)
     if cfg.record:
         from cat.viz.record import RolloutRecorder
 
@@ -131,4 +138,5 @@ def play_trials(cfg: PlayCfg) -> Played:
         recorder.close()
     first = contacts.first_bodies(len(trials)) if cfg.contacts else None
     depth = clearance.clearances(len(trials)) if cfg.clearance else None
-    return Played(trials, results, list(group.scenes) if group is not None else None, first, depth)
+    fell = falls.records(len(trials)) if cfg.falls else None
+    return Played(trials, results, list(group.scenes) if group is not None else None, first, depth, fell)

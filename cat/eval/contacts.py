@@ -28,6 +28,14 @@ TOLERANCES = (0.01, 0.02, 0.04)
 """m: the depth tolerances ``clearance_line`` reads the success rate at (0.04: the release's training rule)."""
 
 
+def first_trials_of(flat: list, num_trials: int) -> list:
+    """The first ``num_trials`` of an ``on_step`` hook's per-slot records, concatenated over batches in trial order
+    (a short last batch leaves its idle envs out); too few slots is an error, never a short list."""
+    if len(flat) < num_trials:
+        raise ValueError(f"recorded {len(flat)} trial slots, fewer than the {num_trials} trials asked for")
+    return flat[:num_trials]
+
+
 class FirstContacts:
     """``on_step`` hook for ``cat.eval.runner.run_trials``: records, per trial, the bodies in contact at the
     trial's first step with any robot-obstacle contact ("+"-joined when several touch at once; None: no contact).
@@ -53,10 +61,7 @@ class FirstContacts:
 
     def first_bodies(self, num_trials: int) -> list[str | None]:
         """The first ``num_trials`` records in trial order (a short last batch leaves its idle envs out)."""
-        flat = [b for batch in self._batches for b in batch]
-        if len(flat) < num_trials:
-            raise ValueError(f"recorded {len(flat)} trial slots, fewer than the {num_trials} trials asked for")
-        return flat[:num_trials]
+        return first_trials_of([b for batch in self._batches for b in batch], num_trials)
 
 
 def contact_line(first: list[str | None]) -> str:
@@ -98,10 +103,7 @@ class Clearance:
 
     def clearances(self, num_trials: int) -> list[float]:
         """Each trial's smallest signed distance [m] (``inf``: never near an obstacle), in trial order."""
-        flat = torch.cat(self._batches).tolist() if self._batches else []
-        if len(flat) < num_trials:
-            raise ValueError(f"recorded {len(flat)} trial slots, fewer than the {num_trials} trials asked for")
-        return flat[:num_trials]
+        return first_trials_of(torch.cat(self._batches).tolist() if self._batches else [], num_trials)
 
 
 def tolerant_success(results: list[TrialResult], clearance: list[float], tolerance: float) -> float:

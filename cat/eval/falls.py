@@ -14,6 +14,9 @@ import numpy as np
 import torch
 
 from cat.envs.trial_metrics import TrialResult
+from cat.eval.contacts import first_trials_of
+
+_KEYS = ("time", "progress", "touched")
 
 
 class Falls:
@@ -47,18 +50,13 @@ class Falls:
     def records(self, num_trials: int) -> list[tuple[float, float, bool]]:
         """``(fall time [s], progress, touched)`` of the first ``num_trials`` trials in order (``inf``, ``nan``,
         False: no fall)."""
-        if not self._batches:
-            raise ValueError(f"recorded 0 trial slots, fewer than the {num_trials} trials asked for")
-        cols = [torch.cat([b[k] for b in self._batches]) for k in ("time", "progress", "touched")]
-        if len(cols[0]) < num_trials:
-            raise ValueError(f"recorded {len(cols[0])} trial slots, fewer than the {num_trials} trials asked for")
-        time, progress, touched = (c[:num_trials].tolist() for c in cols)
-        return list(zip(time, progress, touched, strict=True))
+        cols = [torch.cat([b[k] for b in self._batches]).tolist() if self._batches else [] for k in _KEYS]
+        return first_trials_of(list(zip(*cols, strict=True)), num_trials)
 
 
 def falls_line(results: list[TrialResult], records: list[tuple[float, float, bool]]) -> str:
     """``falls=<n>/<N> fall_time_s=<q25>/<median>/<q75> fall_progress_median=<x> falls_without_contact=<k>``."""
-    fell = [rec for r, rec in zip(results, records, strict=True) if r.fell and math.isfinite(rec[0])]
+    fell = [rec for r, rec in zip(results, records, strict=True) if r.fell]
     if not fell:
         return f"falls=0/{len(results)}"
     times = np.array([t for t, _, _ in fell])

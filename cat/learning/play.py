@@ -21,7 +21,7 @@ from cat.eval.falls import Falls
 from cat.eval.runner import EvalCfg, make_eval_env, run_scene_group, run_trials
 from cat.eval.trials import Trial, first_trials, flat_trials, scene_trials
 from cat.learning.runs import load_run_config, resolve_checkpoint
-from cat.run.policy import load_policy
+from cat.run.policy import MirrorAveraged, load_policy
 from cat.terrain.scene import Scene
 
 log = logging.getLogger(__name__)
@@ -45,6 +45,7 @@ class PlayCfg:
     contacts: bool = False  # scripts/play.py also prints which body touched first (cat.eval.contacts)
     clearance: bool = False  # ... and the success rate at contact-depth tolerances (cat.eval.contacts.Clearance)
     falls: bool = False  # scripts/play.py also prints when the falls came and how far along (cat.eval.falls)
+    symmetric: bool = False  # play the policy averaged with its mirror image (cat.run.policy.MirrorAveraged)
 
 
 class Played(NamedTuple):
@@ -106,6 +107,8 @@ def play_trials(cfg: PlayCfg) -> Played:
     sim, device, trained = cfg.sim or run_cfg.sim.backend, run_cfg.sim.device, run_cfg.sim.obstacles
     env = make_eval_env(task, group, n, opts, sim=sim, device=device, trained_obstacles=trained)  # physical
     policy = load_policy(cfg.checkpoint, env, run_cfg)
+    if cfg.symmetric:
+        policy = MirrorAveraged(policy, env)
     hooks = []
     if cfg.contacts:
         contacts = FirstContacts(env)

@@ -10,6 +10,7 @@ import contextlib
 import io
 import os
 
+import torch
 from tensordict import TensorDict
 
 from cat.checkpoint_io import CheckpointError, read_checkpoint
@@ -58,3 +59,20 @@ def load_policy(checkpoint: str | os.PathLike, env: TraversalEnv, cfg: TrainCfg)
             f"(groups: {', '.join(env.obs_groups)})"
         )
     return load_policy_network(checkpoint, cfg, env.get_observations(), env.num_actions).to(env.device)
+
+
+class MirrorAveraged(torch.nn.Module):
+    """``pi_sym(o) = (pi(o) + M_a pi(M_o o)) / 2``: a policy made exactly left/right equivariant at inference
+    (``cat.envs.symmetry``: the mirror of an observation gives the mirror of the action). A lateralised policy
+    (one that leads with the left foot) plays both sides alike; a symmetric one is unchanged."""
+
+    def __init__(self, policy: torch.nn.Module, env: TraversalEnv):
+        super().__init__()
+        if getattr(policy, "is_recurrent", False):
+            raise CheckpointError("symmetric=true needs a feed-forward policy (a recurrent one keeps one memory)")
+        self.policy, self.mirror = policy, env.mirror_map
+
+    def forward(self, obs: TensorDict) -> torch.Tensor:
+        both = self.policy(torch.cat((obs, self.mirror.mirror_obs(obs)), dim=0))
+        a, b = both.split(obs.batch_size[0])
+        return 0.5 * (a + self.mirror.mirror_actions(b))

@@ -14,6 +14,7 @@ import torch
 from tensordict import TensorDict
 
 from cat.checkpoint_io import CheckpointError, read_checkpoint
+from cat.envs.symmetry import mirror_augment
 from cat.envs.traversal_env import TraversalEnv
 from cat.run.config import TrainCfg, policy_model
 
@@ -70,9 +71,9 @@ class MirrorAveraged(torch.nn.Module):
         super().__init__()
         if getattr(policy, "is_recurrent", False):
             raise CheckpointError("symmetric=true needs a feed-forward policy (a recurrent one keeps one memory)")
-        self.policy, self.mirror = policy, env.mirror_map
+        self.policy, self.env = policy, env
 
     def forward(self, obs: TensorDict) -> torch.Tensor:
-        both = self.policy(torch.cat((obs, self.mirror.mirror_obs(obs)), dim=0))
-        a, b = both.split(obs.batch_size[0])
-        return 0.5 * (a + self.mirror.mirror_actions(b))
+        both, _ = mirror_augment(self.env, obs)  # originals, then their mirror images: one forward pass
+        a, b = self.policy(both).split(obs.batch_size[0])
+        return 0.5 * (a + self.env.mirror_map.mirror_actions(b))

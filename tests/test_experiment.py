@@ -143,6 +143,8 @@ def test_dry_run_prints_chains_and_writes_nothing(tmp_path, capsys, caplog):
         ({"a": {"iterations": 1, "tsk": "flat"}}, [], "did you mean task"),
         ({"a": {"task": "flatt", "iterations": 1}}, [], "valid task options"),
         ({"a": {"task": "flat"}}, [], "give one budget"),
+        ({"a": {"iterations": 1}}, ["max_minutes=-1307"], "max_minutes=-1307: must be >= 0"),
+        ({"a": {"iterations": 1}}, ["torch_threads=0"], "torch_threads=0: must be >= 1"),
     ],
 )
 def test_bad_experiment_one_line_nothing_written(tmp_path, caplog, cells, extra, needle):

@@ -44,6 +44,10 @@ def _cmd(script: str, overrides: list[str]) -> str:
 class Runner:
     def __init__(self, cfg: ExperimentCfg, hydra_args: list[str]):
         check_launcher(hydra_args)  # an unknown launcher is refused before anything is computed or written
+        if cfg.max_minutes < 0:  # a past end time typed as minutes left: never read as "no budget"
+            raise ValueError(f"max_minutes={cfg.max_minutes:g}: must be >= 0 (0 = no budget)")
+        if cfg.torch_threads < 1:
+            raise ValueError(f"torch_threads={cfg.torch_threads}: must be >= 1")
         self.cfg, self.hydra_args = cfg, list(hydra_args)
         self.exp = load_experiment(cfg.experiment)
         self.plan = Plan(self.exp, cfg.root)

@@ -61,6 +61,28 @@ def test_gen_scenes_rejects_unknown_key(tmp_path):
     assert not any(tmp_path.iterdir())
 
 
+@pytest.mark.parametrize(
+    "arg, needle",
+    [
+        ("indoor=-1", "indoor=-1: must be >= 0"),
+        ("typical_variants=-2", "typical_variants=-2: must be >= 0"),
+        ("max_field_goals=-5", "max_field_goals=-5"),
+        ("field_source=voxels", "field_source must be 'occupancy' or 'mesh'"),
+        ("field_dtype=float64", "field_dtype must be 'float32' or 'float16'"),
+    ],
+)
+def test_gen_scenes_refuses_bad_counts_before_building(tmp_path, arg, needle):
+    """A negative count is not "none", and a bad field choice is refused before the first scene, not after it."""
+    from cat.terrain.dataset import GenScenesCfg, build_dataset
+
+    key, value = arg.split("=")
+    cfg = GenScenesCfg(out=str(tmp_path / "ds"), typical_variants=1, procedural=1, indoor=1)
+    setattr(cfg, key, type(getattr(cfg, key))(value))
+    with pytest.raises(ValueError, match=needle):
+        build_dataset(cfg, progress=False)
+    assert not (tmp_path / "ds").exists()
+
+
 @pytest.mark.slow
 def test_gen_scenes_command_as_documented(tmp_path):
     """The issue's command verbatim (fields are precomputed if cat.fields is ready, else skipped)."""

@@ -67,8 +67,22 @@ class Job:
     make: Callable[[], Scene]
 
 
+def check_cfg(cfg: GenScenesCfg) -> None:
+    """Refuse counts and choices that would silently build something else, before any scene is built."""
+    for key in ("typical_variants", "procedural", "indoor"):
+        if getattr(cfg, key) < 0:
+            raise ValueError(f"{key}={getattr(cfg, key)}: must be >= 0 (0 = none)")
+    if cfg.max_field_goals < -1:
+        raise ValueError(f"max_field_goals={cfg.max_field_goals}: must be >= 0, or -1 for every goal")
+    if cfg.field_source not in ("occupancy", "mesh"):
+        raise ValueError(f"field_source must be 'occupancy' or 'mesh', got {cfg.field_source!r}")
+    if cfg.field_dtype not in ("float32", "float16"):
+        raise ValueError(f"field_dtype must be 'float32' or 'float16', got {cfg.field_dtype!r}")
+
+
 def jobs(cfg: GenScenesCfg) -> list[Job]:
     """Every scene the config asks for, in a fixed order with fixed seeds."""
+    check_cfg(cfg)
     out = Path(cfg.out)
     todo: list[Job] = []
     if cfg.typical_shapes not in TYPICAL_SHAPES:

@@ -192,3 +192,22 @@ def test_max_noise_std_clamps_the_learned_std_and_bad_values_are_refused(tmp_pat
     assert 0.9 < spreads[0.0] < 1.1 and 0.17 < spreads[0.2] < 0.23
     with pytest.raises(ValueError, match="algo.max_noise_std=-1.0: must be >= 0"):
         validate_train_cfg(_small(tmp_path, "algo.max_noise_std=-1.0"))
+
+
+@pytest.mark.parametrize(
+    "override, needle",
+    [
+        ("algo.gamma=1.5", "algo.gamma=1.5: must be in [0, 1]"),
+        ("algo.lam=-0.1", "algo.lam=-0.1: must be in [0, 1]"),
+        ("algo.learning_rate=0.0", "algo.learning_rate=0.0: must be > 0"),
+        ("algo.clip_param=-0.2", "algo.clip_param=-0.2: must be > 0"),
+        ("algo.entropy_coef=-0.01", "algo.entropy_coef=-0.01: must be >= 0"),
+    ],
+)
+def test_ppo_constants_out_of_range_are_refused(tmp_path, override, needle):
+    """A discount above 1 or a zero rate trains something else without an error: refused before any env is built."""
+    from cat.learning.runs import validate_train_cfg
+
+    validate_train_cfg(_small(tmp_path))  # the defaults pass
+    with pytest.raises(ValueError, match=re.escape(needle)):
+        validate_train_cfg(_small(tmp_path, override))

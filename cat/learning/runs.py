@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import functools
 import logging
 import os
@@ -148,6 +150,17 @@ def validate_train_cfg(cfg: TrainCfg) -> None:
     for key, value in nonnegative.items():
         if value < 0:
             raise ValueError(f"{key}={value}: must be >= 0 (0 = off / default)")
+    algo = cfg.algo
+    # PPO's constants, where a value out of range trains something else without an error
+    for key, value in {"algo.gamma": algo.gamma, "algo.lam": algo.lam}.items():
+        if not 0.0 <= value <= 1.0:
+            raise ValueError(f"{key}={value}: must be in [0, 1]")
+    for key in ("learning_rate", "clip_param", "init_noise_std"):
+        if not 0.0 < getattr(algo, key) < math.inf:
+            raise ValueError(f"algo.{key}={getattr(algo, key)}: must be > 0")
+    for key in ("entropy_coef", "value_loss_coef", "max_grad_norm", "mirror_loss_coeff"):
+        if getattr(algo, key) < 0:
+            raise ValueError(f"algo.{key}={getattr(algo, key)}: must be >= 0")
     cfg.task.scene_kind, cfg.task.scene_groups = check_scene_task(cfg.task)  # canonical kind names
     if cfg.task.episode_length_s <= 0:
         raise ValueError(f"task.episode_length_s={cfg.task.episode_length_s}: must be > 0")

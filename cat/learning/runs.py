@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
-import math
-
 import functools
 import logging
+import math
 import os
 import shutil
 import signal

@@ -337,6 +337,8 @@ def test_a_key_added_at_its_old_behaviour_keeps_the_run_hashes(tmp_path):
     assert on["task"]["episodes"]["goal_stand_radius"] == 0.24
     assert "max_noise_std" not in _comparable(load_config([]))["algo"]  # likewise algo.max_noise_std at 0
     assert _comparable(load_config(["algo.max_noise_std=0.5"]))["algo"]["max_noise_std"] == 0.5
+    assert "warmup_bar_pitch" not in _comparable(load_config(["task=multi_hurdle"]))["task"]  # likewise, at false
+    assert _comparable(load_config(["task=multi_hurdle", "task.warmup_bar_pitch=true"]))["task"]["warmup_bar_pitch"]
     hashes = []
     for storage in ("float32", "compact"):
         cells = {

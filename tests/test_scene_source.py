@@ -114,6 +114,8 @@ def test_a_folder_of_links_plays_as_it_trains(tmp_path):
         (dict(scene_dir="x", data="nope"), "nope"),
         (dict(scene_dir="x", warmup_variants=2), "warmup_variants builds typical scenes"),
         (dict(scene_kind="side-pass", warmup_variants=-1), "must be >= 0"),
+        (dict(scene_kind="side-pass", warmup_variants=2, warmup_bar_pitch=True), "grades multi-hurdle's warm-ups"),
+        (dict(scene_kind="multi-hurdle", warmup_bar_pitch=True), "task.warmup_variants > 0"),
     ],
 )
 def test_bad_scene_keys_are_refused_everywhere(kw, match):
@@ -160,3 +162,18 @@ def test_shipped_runs_name_the_scenes_their_config_says(run):
             task.scene_seed,
             task.warmup_variants,
         )
+
+
+def test_graded_bar_pitch_reaches_training_and_the_warmup_diagnostic():
+    """``task.warmup_bar_pitch``: the training scene set and ``warmup=true`` build the same graded warm-ups;
+    the diagnostic refuses it for a kind it does not grade."""
+    task = _task(scene_kind="multi-hurdle", scene_variants=1, warmup_variants=2, warmup_bar_pitch=True)
+    source = eval_scene_source(task, warmup=True)
+    assert source == SceneSource(("multi-hurdle",), variants=0, seed=0, warmup=2, warmup_pitch=True)
+    trained = [s for s in scene_set_for(task, 2).scenes if s.difficulty < 0]
+    played = run_scene_group(task, warmup=True).scenes
+    assert [s.mesh.bounds.tolist() for s in trained] == [s.mesh.bounds.tolist() for s in played]
+    random = run_scene_group(_task(scene_kind="multi-hurdle", scene_variants=1, warmup_variants=2), warmup=True)
+    assert [s.mesh.bounds.tolist() for s in random.scenes] != [s.mesh.bounds.tolist() for s in played]
+    with pytest.raises(ValueError, match="not 'hurdle-crouch'"):
+        eval_scene_source(task, scene_kind="hurdle_crouch", warmup=True)

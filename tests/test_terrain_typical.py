@@ -142,3 +142,32 @@ def test_unseen_shapes_keep_the_layout_and_change_every_obstacle(kind):
     assert free[0] > free[1], free
     with pytest.raises(SceneError, match="unknown typical shapes 'odd'; valid: paper, unseen"):
         make_typical(kind, 0.5, 0, "odd")
+
+
+def _bar_spans(scene) -> list[tuple[float, float]]:
+    """(near edge, far edge) in x of each bar of a multi-hurdle scene, in course order."""
+    parts = scene.mesh.split(only_watertight=False)
+    return sorted((float(p.bounds[0, 0]), float(p.bounds[1, 0])) for p in parts)
+
+
+def test_graded_pitch_orders_multi_hurdle_warmups_by_their_gap():
+    """``graded_pitch``: the floor gap between the two warm-up bars shrinks with d (0.85-0.90 m at d = -1 to
+    about 0.3 m at d = -0.1) and the bars stay on the course, whatever the seed; the paper's variants and the
+    random layout are untouched by the flag."""
+    for seed in range(5):
+        scenes = warmup_variants("multi-hurdle", 10, seed, graded_pitch=True)
+        gaps = []
+        for s in scenes:
+            (a0, a1), (b0, b1) = _bar_spans(s)
+            assert a0 >= 0.39 and b1 <= 1.75 + 1e-6, (seed, s.difficulty, a0, b1)
+            gaps.append(b0 - a1)
+        assert 0.84 <= gaps[0] <= 0.91 and 0.28 <= gaps[-1] <= 0.36, (seed, gaps)
+        assert all(g1 > g2 - 0.05 for g1, g2 in zip(gaps[:-1], gaps[1:], strict=True)), (
+            gaps
+        )  # shrinking, up to the 5 cm jitter
+        random = warmup_variants("multi-hurdle", 10, seed)
+        assert [_bar_spans(s) for s in random] != [_bar_spans(s) for s in scenes]
+    for d in (0.0, 0.6):  # the paper's variants: the same with and without the flag
+        assert _bar_spans(make_typical("multi-hurdle", d, 3, graded_pitch=True)) == _bar_spans(
+            make_typical("multi-hurdle", d, 3)
+        )

@@ -266,6 +266,10 @@ class EnvCfg:
     # [-1, 0): lower bars, higher ceilings, wider gaps; cat.terrain.typical.warmup_variants), so the difficulty
     # curriculum starts where the walking prior succeeds. Never evaluated (cat.eval builds the paper's variants).
     warmup_variants: int = 0
+    # training aid: multi-hurdle's warm-ups place their two bars at a floor gap shrinking with d (0.85 -> 0.25 m)
+    # instead of random gaps, so the curriculum's levels are ordered by the pitch that sets their success
+    # (cat.terrain.typical.GRADED_GAP; docs/multi_hurdle.md). Needs multi-hurdle among the kinds and warm-ups.
+    warmup_bar_pitch: bool = False
     # training aid: add the left/right mirror image of every scene (cat.terrain.Scene.mirrored), so a scene set
     # that is not balanced (eight of the paper's ten side-pass variants open to the left first) cannot teach one
     # handedness only. Real experience on both sides, unlike PPO's symmetry augmentation. Never evaluated.

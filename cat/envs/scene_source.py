@@ -37,6 +37,7 @@ class SceneSource:
     variants: int = 10  # typical: the paper's variants per kind (difficulties spread over [0, 1])
     seed: int = 0  # typical: seeds seed..seed+variants-1 (the scene seed, not the RL seed)
     warmup: int = 0  # typical: training-only warm-up variants per kind (difficulty in [-1, 0))
+    warmup_pitch: bool = False  # typical: multi-hurdle warm-ups at a graded bar pitch (EnvCfg.warmup_bar_pitch)
     mirror: bool = False  # each scene followed by its left/right mirror image
     episodes: EpisodeCfg | None = None  # start / goal sampling (None: the scenes' start regions)
 
@@ -48,7 +49,15 @@ class SceneSource:
         kw = dict(device=device, per_world=per_world, mirror=self.mirror, episodes=self.episodes, dtype=storage)
         if self.scene_dir:
             return SceneSet.from_dir(self.scene_dir, num_envs=num_envs, kind=self.kind, data=self.data, **kw)
-        return SceneSet.typical(list(self.typical), num_envs, self.variants, self.seed, warmup=self.warmup, **kw)
+        return SceneSet.typical(
+            list(self.typical),
+            num_envs,
+            self.variants,
+            self.seed,
+            warmup=self.warmup,
+            warmup_pitch=self.warmup_pitch,
+            **kw,
+        )
 
 
 def typical_kind_or_none(name: str) -> str | None:
@@ -85,6 +94,9 @@ def check_scene_task(task: EnvCfg) -> tuple[str | None, list[str]]:
     check_episode_cfg(task.episodes)
     if task.warmup_variants and task.scene_dir:
         raise ValueError("task.warmup_variants builds typical scenes: it cannot be used with task.scene_dir")
+    if task.warmup_bar_pitch and ("multi-hurdle" not in [scene_kind, *groups] or not task.warmup_variants):
+        raise ValueError("task.warmup_bar_pitch grades multi-hurdle's warm-ups: needs task.scene_kind (or "
+                         "scene_groups) with multi-hurdle and task.warmup_variants > 0")  # fmt: skip
     return scene_kind, groups
 
 
@@ -101,7 +113,12 @@ def scene_source(task: EnvCfg) -> SceneSource | None:
         return None
     typical = tuple(groups) if groups else (kind,)
     return SceneSource(
-        typical, variants=task.scene_variants, seed=task.scene_seed, warmup=task.warmup_variants, **common
+        typical,
+        variants=task.scene_variants,
+        seed=task.scene_seed,
+        warmup=task.warmup_variants,
+        warmup_pitch=task.warmup_bar_pitch,
+        **common,
     )
 
 
@@ -143,7 +160,15 @@ def eval_scene_source(
         if warmup:
             if task.warmup_variants < 1:
                 raise ValueError(f"warmup=true: the run's task {task.scene_kind!r} has no warm-up scenes")
-            return SceneSource((task.scene_kind,), variants=0, seed=seed, warmup=task.warmup_variants)
+            if task.warmup_bar_pitch and kind_name(task.scene_kind) != "multi-hurdle":
+                raise ValueError(f"the graded bar pitch is multi-hurdle's warm-up layout, not {task.scene_kind!r}'s")
+            return SceneSource(
+                (task.scene_kind,),
+                variants=0,
+                seed=seed,
+                warmup=task.warmup_variants,
+                warmup_pitch=task.warmup_bar_pitch,
+            )
         return SceneSource((task.scene_kind,), variants=task.scene_variants, seed=seed)
     if warmup:
         raise ValueError("warmup=true needs a typical scene kind; this run trained on flat ground")

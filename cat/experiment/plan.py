@@ -39,6 +39,7 @@ NEUTRAL_DEFAULTS = {
     ("task", "episodes", "goal_stand_radius"): 0.0,
     ("algo", "max_noise_std"): 0.0,
     ("task", "curriculum", "group_weights"): {},
+    ("task", "warmup_bar_pitch"): False,
     ("algo", "rehearsal"): {  # off: plain PPO
         "learning_rate": 0.0,
         "num_learning_epochs": 1,

@@ -42,6 +42,7 @@ class PlayCfg:
     record: str = ""  # .rrd path: record world 0 of the rollout for rerun replay (`rerun <file>`)
     by_scene: bool = False  # scripts/play.py also prints one line per evaluated scene (where a policy fails)
     warmup: bool = False  # the run's training-only warm-up scenes (d < 0) instead: curriculum progress, diagnostic
+    warmup_pitch: bool | None = None  # with warmup: multi-hurdle's graded-pitch warm-ups (None: as the run trained)
     contacts: bool = False  # scripts/play.py also prints which body touched first (cat.eval.contacts)
     clearance: bool = False  # ... and the success rate at contact-depth tolerances (cat.eval.contacts.Clearance)
     falls: bool = False  # scripts/play.py also prints when the falls came and how far along (cat.eval.falls)
@@ -84,6 +85,10 @@ def play_trials(cfg: PlayCfg) -> Played:
     task = run_cfg.task
     if cfg.episodes < 1:
         raise ValueError(f"episodes must be >= 1, got {cfg.episodes}")
+    if cfg.warmup_pitch is not None:
+        if not cfg.warmup:
+            raise ValueError("warmup_pitch= chooses the warm-up layout: it needs warmup=true")
+        task = replace(task, warmup_bar_pitch=cfg.warmup_pitch)
     group = run_scene_group(task, cfg.scene_seed, cfg.scene_dir, cfg.scene_kind, cfg.warmup)
     for option in ("mirror", "contacts", "clearance"):
         if getattr(cfg, option) and group is None:

@@ -75,6 +75,12 @@ BAR_TOP_WARMUP = 0.045  # [m]
 BAR_RADIUS_WARMUP = 0.025  # 5 cm wide at 2 cm height, 3 cm at the floor [m]
 BAR_SPAN, CEILING_SPAN = (-1.0, -0.5), (-0.5, 0.0)  # warm-up ranges of d over which bars rise, ceilings drop
 WARMUP = (-1.0, 0.0)  # the whole warm-up range: bars in scenes without a ceiling grow over all of it
+# Graded bar pitch (multi-hurdle warm-ups, ``graded_pitch``): the first bar's near edge and the floor gap between the
+# two bars shrink with d from the first to the second value (+ up to 5 cm of jitter each), instead of random gaps.
+# The gap, not the bar height, sets a warm-up's success (docs/multi_hurdle.md, "The bar pitch"); the paper's
+# three-bar variants leave 0.23-0.32 m.
+GRADED_FIRST_BAR = (0.70, 0.40)  # [m] from the course origin (the start region ends at x = 0.1)
+GRADED_GAP = (0.85, 0.25)  # [m]
 
 
 def lerp(a: float, b: float, t: float) -> float:
@@ -88,8 +94,10 @@ class _Params:
     """Difficulty-driven parameters with a small per-seed jitter (monotone in d for a fixed seed); ``srng`` draws
     the unseen shapes (None: the paper's), apart from ``rng`` so a seed's layout is the same in both."""
 
-    def __init__(self, d: float, rng: np.random.Generator, srng: np.random.Generator | None = None):
-        self.d, self.rng, self.srng = d, rng, srng
+    def __init__(
+        self, d: float, rng: np.random.Generator, srng: np.random.Generator | None = None, graded: bool = False
+    ):
+        self.d, self.rng, self.srng, self.graded = d, rng, srng, graded
 
     def __call__(
         self,
@@ -265,6 +273,16 @@ def _sequence(elements: list[Element], rng: np.random.Generator, min_gap: float 
     return parts
 
 
+def _graded_pair(p: _Params) -> list[trimesh.Trimesh]:
+    """Two warm-up bars whose first position and floor gap shrink with d (``GRADED_FIRST_BAR``, ``GRADED_GAP``)."""
+    (w1, build1), (w2, build2) = _bar(p, WARMUP), _bar(p, WARMUP)
+    t = p.d - WARMUP[0]
+    x0 = lerp(*GRADED_FIRST_BAR, t) + p.rng.uniform(0.0, 0.05)
+    gap = lerp(*GRADED_GAP, t) + p.rng.uniform(0.0, 0.05)
+    x0 -= max(x0 + w1 + gap + w2 - COURSE[1], 0.0)  # the second bar ends on the course
+    return build1(x0) + build2(x0 + w1 + gap)
+
+
 def _corridor(p: _Params) -> list[trimesh.Trimesh]:
     half = p(1.3, 0.75, jitter=0.05, trivial=1.8) / 2
     x0, x1 = COURSE[0] - 0.05, COURSE[1] - 0.05
@@ -292,15 +310,20 @@ def _layout(kind: str, p: _Params) -> list[trimesh.Trimesh]:
         return _sequence([_slit(p, yc=off), _slit(p, yc=-off)], rng, min_gap=0.45)
     if kind == "multi-hurdle":
         n = 2 if p.d < 0.5 else 3
+        if p.graded and p.d < 0:
+            return _graded_pair(p)
         return _sequence([_bar(p, WARMUP) for _ in range(n)], rng, min_gap=0.3)
     raise SceneError(f"unknown typical scene type {kind!r}; valid: {', '.join(TYPICAL_KINDS)}")
 
 
-def make_typical(kind: str, difficulty: float = 0.5, seed: int = 0, shapes: str = "paper") -> Scene:
+def make_typical(
+    kind: str, difficulty: float = 0.5, seed: int = 0, shapes: str = "paper", graded_pitch: bool = False
+) -> Scene:
     """One typical scene of ``kind`` (see ``TYPICAL_KINDS``); deterministic in (kind, difficulty, seed, shapes).
 
     ``difficulty`` ∈ [0, 1] spans the paper's range; [−1, 0) is the training-only warm-up range. ``shapes``: the
     paper's building blocks, or ``unseen`` ones (module docstring; evaluation only, never a training scene).
+    ``graded_pitch``: a multi-hurdle warm-up places its bars by ``GRADED_GAP`` (the paper's variants never change).
     """
     if not -1.0 <= difficulty <= 1.0:
         raise SceneError(f"difficulty must be in [-1, 1] ([0, 1] for the paper's scenes), got {difficulty}")
@@ -308,7 +331,8 @@ def make_typical(kind: str, difficulty: float = 0.5, seed: int = 0, shapes: str 
         raise SceneError(f"unknown typical shapes {shapes!r}; valid: {', '.join(SHAPES)}")
     key = [seed, TYPICAL_KINDS.index(kind) if kind in TYPICAL_KINDS else 99]
     srng = np.random.default_rng([*key, UNSEEN_SHAPES_STREAM]) if shapes == "unseen" else None
-    parts = crop_parts(_layout(kind, _Params(difficulty, np.random.default_rng(key), srng)), BOUNDS[0], BOUNDS[1])
+    params = _Params(difficulty, np.random.default_rng(key), srng, graded_pitch)
+    parts = crop_parts(_layout(kind, params), BOUNDS[0], BOUNDS[1])
     return Scene(
         mesh=combine(parts),
         bounds=BOUNDS.copy(),
@@ -331,8 +355,11 @@ def typical_variants(kind: str, n: int = 10, seed: int = 0, shapes: str = "paper
 WARMUP_SEED_OFFSET = 10_000  # warm-up scenes never share a seed with the paper's variants
 
 
-def warmup_variants(kind: str, n: int, seed: int = 0) -> list[Scene]:
+def warmup_variants(kind: str, n: int, seed: int = 0, graded_pitch: bool = False) -> list[Scene]:
     """``n`` training-only scenes of ``kind`` easier than the paper's easiest: difficulties −1, −1 + 1/n, …,
-    −1/n (seeds ``WARMUP_SEED_OFFSET`` + seed + i), so a curriculum climbs from walking to the paper's range."""
+    −1/n (seeds ``WARMUP_SEED_OFFSET`` + seed + i), so a curriculum climbs from walking to the paper's range.
+    ``graded_pitch``: multi-hurdle's bars at a gap shrinking with d (``make_typical``)."""
     ds = -1.0 + np.arange(n) / max(n, 1)
-    return [make_typical(kind, float(d), WARMUP_SEED_OFFSET + seed + i) for i, d in enumerate(ds)]
+    return [
+        make_typical(kind, float(d), WARMUP_SEED_OFFSET + seed + i, graded_pitch=graded_pitch) for i, d in enumerate(ds)
+    ]

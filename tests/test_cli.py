@@ -139,6 +139,7 @@ def tiny_run(tmp_path_factory):
         (["sim=warpp"], "unknown sim backend 'warpp'"),
         (["record=/no/such/folder/x.rrd"], "does not exist"),
         (["time_s=0"], "time_s must be > 0"),
+        (["warmup_pitch=true"], "warmup_pitch= chooses the warm-up layout: it needs warmup=true"),
     ],
 )
 def test_play_refuses_bad_values(tiny_run, caplog, args, needle):

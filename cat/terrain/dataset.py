@@ -67,6 +67,9 @@ class Job:
     make: Callable[[], Scene]
 
 
+FIELD_SOURCES = ("occupancy", "mesh")  # what HumanoidPF is computed from: the scene's voxels, or its mesh
+
+
 def check_cfg(cfg: GenScenesCfg) -> None:
     """Refuse counts and choices that would silently build something else, before any scene is built."""
     for key in ("typical_variants", "procedural", "indoor"):
@@ -74,10 +77,14 @@ def check_cfg(cfg: GenScenesCfg) -> None:
             raise ValueError(f"{key}={getattr(cfg, key)}: must be >= 0 (0 = none)")
     if cfg.max_field_goals < -1:
         raise ValueError(f"max_field_goals={cfg.max_field_goals}: must be >= 0, or -1 for every goal")
-    if cfg.field_source not in ("occupancy", "mesh"):
-        raise ValueError(f"field_source must be 'occupancy' or 'mesh', got {cfg.field_source!r}")
+    _check_field_source(cfg.field_source)
     if cfg.field_dtype not in ("float32", "float16"):
         raise ValueError(f"field_dtype must be 'float32' or 'float16', got {cfg.field_dtype!r}")
+
+
+def _check_field_source(source: str) -> None:
+    if source not in FIELD_SOURCES:
+        raise ValueError(f"field_source must be 'occupancy' or 'mesh', got {source!r}")
 
 
 def jobs(cfg: GenScenesCfg) -> list[Job]:
@@ -159,8 +166,7 @@ def build_fields(
     if ns is None:
         return False
     fa = ns.api
-    if source not in ("occupancy", "mesh"):
-        raise ValueError(f"field_source must be 'occupancy' or 'mesh', got {source!r}")
+    _check_field_source(source)
     g = scene.grid()
     grid = fa.Grid(g.origin, g.voxel, g.shape)
     goals = scene.goals if max_goals < 0 else scene.goals[:max_goals]

@@ -177,10 +177,15 @@ def test_play_by_scene_lines_add_up_to_the_summary(method_runs):
     trials = trials + [replace(trials[0], scene=1)]
     results = results + [TrialResult(success=True, de=0.02, collided=False, fell=False, reach_time=1.0)]
     lines = scene_lines(trials, results, [scenes[0], other])
-    assert (
-        lines[0] == f"scene=0 kind=hurdle-crouch difficulty={scenes[0].difficulty:.2f} {summarize(results[:3]).line()}"
+    assert lines[0].startswith(
+        f"scene=0 kind=hurdle-crouch difficulty={scenes[0].difficulty:.2f} {summarize(results[:3]).line()} layout="
     )
-    assert lines[1] == f"scene=1 kind=crouch-pass difficulty=0.75 {summarize(results[3:]).line()}"
+    lay = other.meta["layout"]  # then the typical scene's layout (cat.terrain.typical.LAYOUT_KEYS)
+    assert lines[1] == (
+        f"scene=1 kind=crouch-pass difficulty=0.75 {summarize(results[3:]).line()} "
+        f"layout=corridor_width:{lay['corridor_width'][0]:.2f},ceiling_bottom:{lay['ceiling_bottom'][0]:.2f},"
+        f"x:{lay['x'][0]:.2f}"
+    )
     assert len(lines) == 2
 
 

@@ -171,3 +171,36 @@ def test_graded_pitch_orders_multi_hurdle_warmups_by_their_gap():
         assert _bar_spans(make_typical("multi-hurdle", d, 3, graded_pitch=True)) == _bar_spans(
             make_typical("multi-hurdle", d, 3)
         )
+
+
+def _slit_walls(scene) -> tuple[float, float, float]:
+    """(near edge x, gap, centre y) of the first full-height slit wall pair of a scene."""
+    walls = sorted(
+        (p.bounds for p in scene.mesh.split(only_watertight=False) if p.bounds[0, 2] < 0.01 and p.bounds[1, 2] > 1.4),
+        key=lambda b: (round(float(b[0, 0]), 3), float(b[0, 1])),
+    )
+    lo, hi = walls[0], walls[1]
+    return float(lo[0, 0]), float(hi[0, 1] - lo[1, 1]), float(hi[0, 1] + lo[1, 1]) / 2
+
+
+@pytest.mark.parametrize("seed", [0, 4])
+def test_layout_records_what_the_mesh_holds(seed):
+    """``meta["layout"]`` (play.py by_scene=true prints it) is the built geometry: a slit's gap, centre and near
+    edge, a bar's top, a corridor's width; its lateral entries change sign with the mirror image."""
+    for d in (-0.6, 0.2, 0.9):
+        s = make_typical("side-hurdle", d, seed)
+        lay = s.meta["layout"]
+        x0, gap, yc = _slit_walls(s)
+        assert lay["x"][0] == pytest.approx(x0, abs=2e-3)  # the slit is placed first
+        assert lay["slit_gap"][0] == pytest.approx(gap, abs=2e-3) and lay["slit_y"][0] == pytest.approx(yc, abs=2e-3)
+        bar = min(s.mesh.split(only_watertight=False), key=lambda p: p.bounds[1, 2])
+        assert lay["bar_top"][0] == pytest.approx(float(bar.bounds[1, 2]), abs=2e-3)
+        assert lay["x"][1] == pytest.approx(float(bar.bounds[0, 0]), abs=2e-3)
+        m = s.mirrored()
+        assert m.meta["layout"]["slit_y"][0] == pytest.approx(_slit_walls(m)[2], abs=2e-3) == -lay["slit_y"][0]
+        assert m.meta["layout"]["slit_gap"] == lay["slit_gap"] and s.meta["layout"] is lay  # the original unchanged
+        corridor = make_typical("crouch-pass", d, seed)
+        blocks = [p.bounds for p in corridor.mesh.split(only_watertight=False) if p.bounds[0, 2] < 0.01]
+        width = min(b[0, 1] for b in blocks if b[0, 1] > 0) - max(b[1, 1] for b in blocks if b[1, 1] < 0)
+        assert corridor.meta["layout"]["corridor_width"][0] == pytest.approx(float(width), abs=2e-3)
+    assert len(make_typical("multi-hurdle", 0.9, seed).meta["layout"]["bar_top"]) == 3

@@ -68,12 +68,17 @@ def play(cfg: PlayCfg) -> Summary:
 
 
 def scene_lines(trials: list[Trial], results: list[TrialResult], scenes: list[Scene] | None) -> list[str]:
-    """One line per evaluated scene: ``scene=<i> kind=<k> difficulty=<d>`` and its trials' summary."""
+    """One line per evaluated scene: ``scene=<i> kind=<k> difficulty=<d>``, its trials' summary and, for a typical
+    scene, its layout (``layout=slit_gap:0.49,slit_y:-0.30,bar_top:0.18,x:0.67/1.15``; cat.terrain.typical)."""
     lines = []
     for i in sorted({t.scene for t in trials}):
         own = [r for t, r in zip(trials, results, strict=True) if t.scene == i]
         kind, d = (scenes[i].kind, float(scenes[i].difficulty)) if scenes is not None else ("flat", 0.0)
-        lines.append(f"scene={i} kind={kind} difficulty={d:.2f} {summarize(own).line()}")
+        line = f"scene={i} kind={kind} difficulty={d:.2f} {summarize(own).line()}"
+        layout = scenes[i].meta.get("layout") if scenes is not None else None
+        if layout:
+            line += " layout=" + ",".join(f"{k}:{'/'.join(f'{v:.2f}' for v in vs)}" for k, vs in layout.items())
+        lines.append(line)
     return lines
 
 

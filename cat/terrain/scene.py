@@ -100,7 +100,7 @@ class Scene:
             difficulty=self.difficulty,
             seed=self.seed,
             start_region=np.array([np.minimum(*region), np.maximum(*region)]),
-            meta={**self.meta, "mirrored": not self.meta.get("mirrored", False)},
+            meta=_mirrored_meta(self.meta),
         )
 
     # ------------------------------------------------------------------------------------ grids
@@ -269,6 +269,15 @@ class Scene:
         if check:
             check_scene(scene)
         return scene
+
+
+def _mirrored_meta(meta: dict) -> dict:
+    """``meta`` of a scene's mirror image: ``mirrored`` toggled, lateral layout entries (``meta["layout"]`` keys
+    ending in ``_y``, e.g. a slit's centre) negated."""
+    out = {**meta, "mirrored": not meta.get("mirrored", False)}
+    if isinstance(meta.get("layout"), dict):
+        out["layout"] = {k: [-v for v in vs] if k.endswith("_y") else list(vs) for k, vs in meta["layout"].items()}
+    return out
 
 
 def _point3(p, name: str) -> np.ndarray:

@@ -87,6 +87,11 @@ def lerp(a: float, b: float, t: float) -> float:
     return float(a + (b - a) * np.clip(t, 0.0, 1.0))
 
 
+# What a typical scene records of its layout (``Scene.meta["layout"]``: name -> values in placement order, metres):
+# sizes drawn from d (bar tops, ceiling undersides, slit gaps, corridor widths), a slit's centre across the course
+# (``slit_y``: lateral, so it changes sign in a mirrored scene) and each placed element's near edge along it (``x``).
+# ``play.py by_scene=true`` prints it beside each scene's results: where a policy fails, and on which layouts.
+LAYOUT_KEYS = ("bar_top", "ceiling_bottom", "slit_gap", "slit_y", "corridor_width", "x")
 SHAPES = ("paper", "unseen")  # the paper's building blocks (training, Table I) | shapes no training scene has
 
 
@@ -98,6 +103,14 @@ class _Params:
         self, d: float, rng: np.random.Generator, srng: np.random.Generator | None = None, graded: bool = False
     ):
         self.d, self.rng, self.srng, self.graded = d, rng, srng, graded
+        self.layout: dict[str, list[float]] = {}  # what ``note`` recorded: the scene's ``meta["layout"]``
+
+    def note(self, name: str, value: float) -> float:
+        """Record one drawn size or position under ``name`` (one of ``LAYOUT_KEYS``) and return it."""
+        if name not in LAYOUT_KEYS:
+            raise ValueError(f"unknown layout key {name!r}; valid: {', '.join(LAYOUT_KEYS)}")
+        self.layout.setdefault(name, []).append(round(float(value), 3))
+        return value
 
     def __call__(
         self,
@@ -122,7 +135,7 @@ Element = tuple[float, Callable[[float], list[trimesh.Trimesh]]]
 
 def _bar(p: _Params, span: tuple[float, float] = BAR_SPAN) -> Element:
     """Hurdle bar; ``span``: the warm-up range of d over which it grows (all of [−1, 0] when no ceiling follows)."""
-    top = p(0.08, 0.25, trivial=BAR_TOP_WARMUP, span=span)
+    top = p.note("bar_top", p(0.08, 0.25, trivial=BAR_TOP_WARMUP, span=span))
     r = max(p(0.08, 0.15, trivial=BAR_RADIUS_WARMUP, span=span), top / 2)  # resting on the floor
     if p.srng is not None:
         return _unseen_hurdle(p.srng, top, 2 * r)
@@ -130,7 +143,7 @@ def _bar(p: _Params, span: tuple[float, float] = BAR_SPAN) -> Element:
 
 
 def _ceiling(p: _Params, depth: tuple[float, float] = (0.3, 0.6)) -> Element:
-    bottom, dep = p(1.15, 1.00, trivial=CLEAR_CEILING, span=CEILING_SPAN), p(*depth)
+    bottom, dep = p.note("ceiling_bottom", p(1.15, 1.00, trivial=CLEAR_CEILING, span=CEILING_SPAN)), p(*depth)
     if p.srng is not None:
         return dep, _unseen_ceiling(p.srng, bottom, dep)
     return dep, lambda x0: [box((x0, -HALF_W, bottom), (x0 + dep, HALF_W, HEIGHT))]
@@ -142,9 +155,10 @@ def _slit_parts(x0: float, gap: float, yc: float) -> list[trimesh.Trimesh]:
 
 
 def _slit(p: _Params, yc: float | None = None) -> Element:
-    gap = p(0.90, 0.32, jitter=0.05, trivial=1.3)
+    gap = p.note("slit_gap", p(0.90, 0.32, jitter=0.05, trivial=1.3))
     if yc is None:
         yc = p.rng.uniform(-1, 1) * (HALF_W - 0.15 - gap / 2) * 0.6
+    p.note("slit_y", yc)
     if p.srng is not None:
         return _unseen_slit(p.srng, gap, yc)
     return WALL_T, lambda x0: _slit_parts(x0, gap, yc)
@@ -154,6 +168,9 @@ def _low_door(p: _Params) -> Element:
     """Slit wall whose gap is capped by a lintel, continued by a ceiling: side-step and crouch at once."""
     gap, yc = p(0.90, 0.36, jitter=0.05, trivial=1.3, span=BAR_SPAN), p.rng.uniform(-0.25, 0.25)
     bottom, dep = p(1.15, 1.00, trivial=CLEAR_CEILING, span=CEILING_SPAN), p(0.2, 0.5)
+    p.note("slit_gap", gap)
+    p.note("slit_y", yc)
+    p.note("ceiling_bottom", bottom)
     if p.srng is not None:
         wall, walls = _unseen_slit(p.srng, gap, yc)
         ceiling = _unseen_ceiling(p.srng, bottom, wall + dep)
@@ -254,8 +271,9 @@ def _unseen_corridor(rng: np.random.Generator, half: float, x0: float, x1: float
     return parts
 
 
-def _sequence(elements: list[Element], rng: np.random.Generator, min_gap: float = 0.25) -> list[trimesh.Trimesh]:
-    """Place elements along the course with random gaps (at least ``min_gap`` when they fit)."""
+def _sequence(elements: list[Element], p: _Params, min_gap: float = 0.25) -> list[trimesh.Trimesh]:
+    """Place elements along the course with random gaps (at least ``min_gap`` when they fit); notes each one's
+    near edge (``x``)."""
     length = COURSE[1] - COURSE[0]
     spare = length - sum(e for e, _ in elements)
     n_gaps = len(elements) + 1
@@ -263,12 +281,12 @@ def _sequence(elements: list[Element], rng: np.random.Generator, min_gap: float 
         raise SceneError(f"typical elements need {length - spare:.2f} m of course, only {length:.2f} m")
     inner = max(min(min_gap, spare / max(n_gaps - 2, 1)), 0.0) if len(elements) > 1 else 0.0
     rest = spare - inner * (len(elements) - 1)
-    w = rng.dirichlet(np.ones(n_gaps))
+    w = p.rng.dirichlet(np.ones(n_gaps))
     gaps = rest * w
     gaps[1:-1] += inner
     parts, x = [], COURSE[0] + gaps[0]
     for (ext, build), g in zip(elements, gaps[1:], strict=True):
-        parts += build(x)
+        parts += build(p.note("x", x))
         x += ext + g
     return parts
 
@@ -280,11 +298,11 @@ def _graded_pair(p: _Params) -> list[trimesh.Trimesh]:
     x0 = lerp(*GRADED_FIRST_BAR, t) + p.rng.uniform(0.0, 0.05)
     gap = lerp(*GRADED_GAP, t) + p.rng.uniform(0.0, 0.05)
     x0 -= max(x0 + w1 + gap + w2 - COURSE[1], 0.0)  # the second bar ends on the course
-    return build1(x0) + build2(x0 + w1 + gap)
+    return build1(p.note("x", x0)) + build2(p.note("x", x0 + w1 + gap))
 
 
 def _corridor(p: _Params) -> list[trimesh.Trimesh]:
-    half = p(1.3, 0.75, jitter=0.05, trivial=1.8) / 2
+    half = p.note("corridor_width", p(1.3, 0.75, jitter=0.05, trivial=1.8)) / 2
     x0, x1 = COURSE[0] - 0.05, COURSE[1] - 0.05
     if p.srng is not None:
         return _unseen_corridor(p.srng, half, x0, x1)
@@ -292,27 +310,26 @@ def _corridor(p: _Params) -> list[trimesh.Trimesh]:
 
 
 def _layout(kind: str, p: _Params) -> list[trimesh.Trimesh]:
-    rng = p.rng
     if kind == "hurdle-crouch":
-        return _sequence([_bar(p), _ceiling(p)], rng)
+        return _sequence([_bar(p), _ceiling(p)], p)
     if kind == "side-hurdle-crouch":
-        return _sequence([_slit(p), _bar(p), _ceiling(p, (0.25, 0.4))], rng)
+        return _sequence([_slit(p), _bar(p), _ceiling(p, (0.25, 0.4))], p)
     if kind == "side-hurdle":
-        return _sequence([_slit(p), _bar(p, WARMUP)], rng)
+        return _sequence([_slit(p), _bar(p, WARMUP)], p)
     if kind == "side-crouch":
-        return _sequence([_low_door(p)], rng)
+        return _sequence([_low_door(p)], p)
     if kind == "hurdle-pass":
-        return _corridor(p) + _sequence([_bar(p, WARMUP)], rng)
+        return _corridor(p) + _sequence([_bar(p, WARMUP)], p)
     if kind == "crouch-pass":
-        return _corridor(p) + _sequence([_ceiling(p, (0.4, 0.9))], rng)
+        return _corridor(p) + _sequence([_ceiling(p, (0.4, 0.9))], p)
     if kind == "side-pass":
-        off = p(0.2, 0.45) * rng.choice([-1.0, 1.0])
-        return _sequence([_slit(p, yc=off), _slit(p, yc=-off)], rng, min_gap=0.45)
+        off = p(0.2, 0.45) * p.rng.choice([-1.0, 1.0])
+        return _sequence([_slit(p, yc=off), _slit(p, yc=-off)], p, min_gap=0.45)
     if kind == "multi-hurdle":
         n = 2 if p.d < 0.5 else 3
         if p.graded and p.d < 0:
             return _graded_pair(p)
-        return _sequence([_bar(p, WARMUP) for _ in range(n)], rng, min_gap=0.3)
+        return _sequence([_bar(p, WARMUP) for _ in range(n)], p, min_gap=0.3)
     raise SceneError(f"unknown typical scene type {kind!r}; valid: {', '.join(TYPICAL_KINDS)}")
 
 
@@ -342,7 +359,12 @@ def make_typical(
         difficulty=float(difficulty),
         seed=int(seed),
         start_region=START_REGION.copy(),
-        meta={"family": "typical", "primitive_parts": True, **({"shapes": shapes} if shapes != "paper" else {})},
+        meta={
+            "family": "typical",
+            "primitive_parts": True,
+            "layout": params.layout,
+            **({"shapes": shapes} if shapes != "paper" else {}),
+        },
     )
 
 

@@ -204,3 +204,17 @@ def test_layout_records_what_the_mesh_holds(seed):
         width = min(b[0, 1] for b in blocks if b[0, 1] > 0) - max(b[1, 1] for b in blocks if b[1, 1] < 0)
         assert corridor.meta["layout"]["corridor_width"][0] == pytest.approx(float(width), abs=2e-3)
     assert len(make_typical("multi-hurdle", 0.9, seed).meta["layout"]["bar_top"]) == 3
+
+
+def test_layout_text_prints_a_recorded_layout_and_survives_a_hand_written_one():
+    """One token per scene for ``play.py by_scene=true``; a scene file's odd ``layout`` prints, it does not raise."""
+    from cat.terrain.typical import layout_text
+
+    s = make_typical("side-hurdle", 0.7, 0)
+    lay = s.meta["layout"]
+    assert layout_text(lay) == (
+        f"slit_gap:{lay['slit_gap'][0]:.2f},slit_y:{lay['slit_y'][0]:.2f},bar_top:{lay['bar_top'][0]:.2f},"
+        f"x:{lay['x'][0]:.2f}/{lay['x'][1]:.2f}"
+    )
+    assert layout_text({"gap": 0.5, "note": ["a b", 2]}) == "gap:0.50,note:ab/2.00"
+    assert layout_text([1, 2]) == "[1,2]"

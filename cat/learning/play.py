@@ -23,6 +23,7 @@ from cat.eval.trials import Trial, first_trials, flat_trials, scene_trials
 from cat.learning.runs import load_run_config, resolve_checkpoint
 from cat.run.policy import MirrorAveraged, load_policy
 from cat.terrain.scene import Scene
+from cat.terrain.typical import layout_text
 
 log = logging.getLogger(__name__)
 
@@ -77,7 +78,7 @@ def scene_lines(trials: list[Trial], results: list[TrialResult], scenes: list[Sc
         line = f"scene={i} kind={kind} difficulty={d:.2f} {summarize(own).line()}"
         layout = scenes[i].meta.get("layout") if scenes is not None else None
         if layout:
-            line += " layout=" + ",".join(f"{k}:{'/'.join(f'{v:.2f}' for v in vs)}" for k, vs in layout.items())
+            line += f" layout={layout_text(layout)}"
         lines.append(line)
     return lines
 

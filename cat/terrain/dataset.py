@@ -84,7 +84,7 @@ def check_cfg(cfg: GenScenesCfg) -> None:
 
 def _check_field_source(source: str) -> None:
     if source not in FIELD_SOURCES:
-        raise ValueError(f"field_source must be 'occupancy' or 'mesh', got {source!r}")
+        raise ValueError(f"field_source must be {' or '.join(map(repr, FIELD_SOURCES))}, got {source!r}")
 
 
 def jobs(cfg: GenScenesCfg) -> list[Job]:

@@ -218,3 +218,10 @@ def test_layout_text_prints_a_recorded_layout_and_survives_a_hand_written_one():
     )
     assert layout_text({"gap": 0.5, "note": ["a b", 2]}) == "gap:0.50,note:ab/2.00"
     assert layout_text([1, 2]) == "[1,2]"
+
+
+def test_mirror_of_a_hand_written_layout():
+    """A scene file's ``layout`` may hold a lone number or text: the mirror image negates lateral numbers only."""
+    s = make_typical("side-hurdle", 0.3, 0)
+    s.meta["layout"] = {"slit_y": 0.2, "door_y": [0.1, "left"], "x": 0.5}
+    assert s.mirrored().meta["layout"] == {"slit_y": -0.2, "door_y": [-0.1, "left"], "x": 0.5}

@@ -276,8 +276,16 @@ def _mirrored_meta(meta: dict) -> dict:
     ending in ``_y``, e.g. a slit's centre) negated."""
     out = {**meta, "mirrored": not meta.get("mirrored", False)}
     if isinstance(meta.get("layout"), dict):
-        out["layout"] = {k: [-v for v in vs] if k.endswith("_y") else list(vs) for k, vs in meta["layout"].items()}
+        out["layout"] = {k: _negated(vs) if k.endswith("_y") else vs for k, vs in meta["layout"].items()}
     return out
+
+
+def _negated(values: object) -> object:
+    """A lateral layout entry of the mirror image: numbers negated, in a list or alone (a hand-written scene file may
+    hold either); anything else is kept as written."""
+    if isinstance(values, list | tuple):
+        return [_negated(v) for v in values]
+    return -values if isinstance(values, int | float) and not isinstance(values, bool) else values
 
 
 def _point3(p, name: str) -> np.ndarray:

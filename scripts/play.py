@@ -8,6 +8,7 @@ Optional: ``record=rollout.rrd`` (rerun replay of world 0), ``seed=`` (start pos
 ``tolerant_success=1cm:<x>,2cm:<x>,4cm:<x> deepest_mm_median=<x> contact_trials=<n>``),
 ``falls=true`` (then ``falls=<n>/<N> fall_time_s=<q25>/<median>/<q75> fall_progress_median=<x>
 falls_without_contact=<k>``: when the falls came, how far along the way, how many before any contact),
+``paths=<file.csv>`` (each trial's root path in its scene's frame, step by step: ``cat.eval.paths.COLUMNS``),
 ``warmup=true`` (the run's training-only warm-up scenes instead of the paper's: where its curriculum stands).
 Prints one line: ``episodes=<n> success_rate=<x> distance_error=<m> collision_rate=<x> fall_rate=<x>``.
 """

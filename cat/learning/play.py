@@ -18,6 +18,7 @@ from tqdm import tqdm
 from cat.envs.trial_metrics import Summary, TrialResult, summarize
 from cat.eval.contacts import Clearance, FirstContacts
 from cat.eval.falls import Falls
+from cat.eval.paths import Paths, write_paths
 from cat.eval.runner import EvalCfg, make_eval_env, run_scene_group, run_trials
 from cat.eval.trials import Trial, first_trials, flat_trials, scene_trials
 from cat.learning.runs import load_run_config, resolve_checkpoint
@@ -48,6 +49,7 @@ class PlayCfg:
     clearance: bool = False  # ... and the success rate at contact-depth tolerances (cat.eval.contacts.Clearance)
     falls: bool = False  # scripts/play.py also prints when the falls came and how far along (cat.eval.falls)
     symmetric: bool = False  # play the policy averaged with its mirror image (cat.run.policy.MirrorAveraged)
+    paths: str = ""  # .csv path: each trial's root path in its scene's frame, step by step (cat.eval.paths)
 
 
 class Played(NamedTuple):
@@ -107,6 +109,8 @@ def play_trials(cfg: PlayCfg) -> Played:
         raise ValueError(f"num_envs must be >= 1 (or left out for min(episodes, 64)), got {cfg.num_envs}")
     if cfg.record and not Path(cfg.record).resolve().parent.is_dir():
         raise ValueError(f"record={cfg.record}: folder {Path(cfg.record).resolve().parent} does not exist")
+    if cfg.paths and not Path(cfg.paths).resolve().parent.is_dir():
+        raise ValueError(f"paths={cfg.paths}: folder {Path(cfg.paths).resolve().parent} does not exist")
     opts = EvalCfg(seed=cfg.seed, success=replace(EvalCfg().success, time_s=cfg.time_s))
     yaw = opts.start_yaw_range
     if group is None:
@@ -130,6 +134,9 @@ def play_trials(cfg: PlayCfg) -> Played:
     if cfg.falls:
         falls = Falls(env)
         hooks.append(falls.on_step)
+    if cfg.paths:
+        paths = Paths(env)
+        hooks.append(paths.on_step)
     if cfg.record:
         from cat.viz.record import RolloutRecorder
 
@@ -150,6 +157,9 @@ def play_trials(cfg: PlayCfg) -> Played:
         results = run_trials(env, policy, trials, seed=cfg.seed, progress=bar, on_step=on_step if hooks else None)
     if cfg.record:
         recorder.close()
+    if cfg.paths:
+        out = write_paths(cfg.paths, trials, results, paths.paths(len(trials)), env.dt)
+        log.info("wrote each trial's path to %s", out)
     first = contacts.first_bodies(len(trials)) if cfg.contacts else None
     depth = clearance.clearances(len(trials)) if cfg.clearance else None
     fell = falls.records(len(trials)) if cfg.falls else None

@@ -17,8 +17,8 @@ from cat.eval.trials import Trial
 
 @pytest.mark.parametrize("per_world", [False, True])
 def test_paths_start_at_each_trials_pose_in_its_scene_frame_and_flag_the_touch(tmp_path, per_world):
-    """Two scenes, tiled side by side in one world or one per world: each path starts at its trial's start and yaw in its own
-    scene's frame, the trial placed astride the bar is touched from the first steps, the free one never."""
+    """Two scenes, tiled side by side in one world or one per world: each path starts at its trial's start and yaw
+    in its own scene's frame, the trial placed astride the bar is touched from the first steps, the free one never."""
     group = SceneGroup.typical("hurdle-pass", 2, 0)
     v = np.asarray(group.scenes[1].mesh.vertices)
     bar = v[(v[:, 2] > 1e-3) & (v[:, 2] < 0.4)]  # the corridor's boxes have no vertex between floor and top

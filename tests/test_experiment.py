@@ -436,3 +436,33 @@ def test_a_shipped_run_is_restored_in_a_fresh_clone_and_another_recipes_is_not(t
     assert (run / "prior/seed0/model_1.pt").read_bytes() == shipped  # the shipped file, not a retrained one
     assert not (run / "prior/seed0/model_0.pt").exists()
     assert yaml.safe_load((run / "next/seed0/config.yaml").read_text())["init"] == str(run / "prior/seed0/model_1.pt")
+
+
+def test_a_shipped_chain_is_restored_under_another_root(tmp_path, caplog, capsys):
+    """A chained cell trained under one experiment root records its init under that root; shipped, it is still
+    its own run under another root (the same upstream run's file), so a fresh clone restores the whole chain
+    whatever ``root=`` it runs with. An init naming another upstream run is not adopted."""
+    from cat.experiment.plan import Plan
+    from cat.experiment.spec import load_experiment
+
+    cells = {"prior": {"task": "flat", "iterations": 2}, "next": {"task": "flat", "init": "prior", "iterations": 1}}
+    path = tmp_path / "exp.yaml"
+    spec = {"common": COMMON, "cells": cells, "shipped": str(tmp_path / "shipped")}
+    path.write_text(yaml.safe_dump(spec))
+    plan = Plan(load_experiment(str(path)), str(tmp_path / "first"))
+    train, ship = load_script(REPO / "scripts" / "train.py"), load_script(REPO / "scripts" / "ship.py")
+    for name in ("prior", "next"):
+        unit = plan.units[f"{name}@0"]
+        assert train.main(plan.fresh_overrides(unit)) == 0
+        assert ship.main([f"checkpoint={unit.run_dir}", f"out={tmp_path / 'shipped/exp' / name / 'seed0'}"]) == 0
+    recorded = yaml.safe_load((tmp_path / "shipped/exp/next/seed0/config.yaml").read_text())["init"]
+    assert recorded == str(tmp_path / "first/exp/runs/prior/seed0/model_1.pt")
+
+    other = Plan(load_experiment(str(path)), str(tmp_path / "exps"))
+    assert other.same_input(recorded, other.path_of("prior@0"))
+    assert not other.same_input(recorded.replace("/prior/", "/elsewhere/"), other.path_of("prior@0"))
+    code, _ = _experiment([f"experiment={path}", f"root={tmp_path / 'exps'}", "dry_run=true"], caplog)
+    out = capsys.readouterr().out
+    assert code == 0 and "another recipe" not in caplog.text
+    for name in ("prior", "next"):
+        assert f"{name}@0 (restore {tmp_path / 'shipped/exp' / name / 'seed0'}: done)" in out, out

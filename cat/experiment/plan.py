@@ -361,7 +361,26 @@ class Plan:
             return False
         fresh = dict(o.split("=", 1) for o in self.fresh_overrides(unit))
         teachers = [t for t in fresh.get("teachers", "[]").strip("[]").split(",") if t]
-        return theirs in mine and (raw.init or None) == fresh.get("init") and list(raw.teachers) == teachers
+        return (
+            theirs in mine
+            and self.same_input(raw.init or None, fresh.get("init"))
+            and len(raw.teachers) == len(teachers)
+            and all(self.same_input(a, b) for a, b in zip(raw.teachers, teachers, strict=True))
+        )
+
+    def same_input(self, theirs: str | None, mine: str | None) -> bool:
+        """Whether a run's recorded input (init, a teacher) is the checkpoint this plan gives the unit: the same
+        path, or the same upstream run's file under another experiment root (a run trained under
+        ``experiments/``, restored under ``root=<elsewhere>``: ``<experiment>/runs/<cell>/seed<k>/model_<it>.pt``
+        alike)."""
+        if theirs == mine or theirs is None or mine is None:
+            return theirs == mine
+        try:
+            rel = Path(mine).relative_to(self.folder)
+        except ValueError:  # a checkpoint outside the experiment (a shipped prior): the path must match
+            return False
+        tail = (self.exp.name, *rel.parts)
+        return Path(theirs).parts[-len(tail) :] == tail
 
     def status(self, unit: Unit) -> str:
         """``done``, ``resume`` (same hash, an earlier checkpoint), ``stale`` (another hash) or ``run``."""

@@ -1,7 +1,8 @@
 """Evaluate a checkpoint on the trial protocol: ``python scripts/play.py checkpoint=<model.pt> episodes=20``.
 
 Optional: ``record=rollout.rrd`` (rerun replay of world 0), ``seed=`` (start poses), ``scene_seed=`` /
-``scene_dir=`` (other scenes than the run's), ``mirror=true`` (their left/right mirror images), ``sim=``,
+``scene_dir=`` (other scenes than the run's), ``scene_variants=`` (how many typical variants: Table I's 10 for a
+run trained on more), ``mirror=true`` (their left/right mirror images), ``sim=``,
 ``num_envs=``, ``by_scene=true`` (first one line per scene: ``scene=<i> kind=<k> difficulty=<d> episodes=...``),
 ``contacts=true`` (then a line naming the body that touched first: ``first_contact=<body>:<trials>,...``),
 ``clearance=true`` (then the success rate if contacts shallower than 1 / 2 / 4 cm were ignored:

@@ -202,3 +202,24 @@ def test_play_on_the_warmup_scenes(method_runs):
     ckpt = str(method_runs["ours"])  # trained with task.warmup_variants=0
     with pytest.raises(ValueError, match="warmup=true: the run's task 'hurdle-crouch' has no warm-up scenes"):
         play_trials(PlayCfg(checkpoint=ckpt, episodes=2, warmup=True))
+
+
+def test_play_scene_variants_and_paths(method_runs, tmp_path):
+    """play.py scene_variants=: Table I's count of variants for a run trained on another (the run's one variant
+    here: two are built, d = 0 and 1); paths= writes each trial's path. Bad counts fail before anything is built."""
+    import csv
+    from pathlib import Path
+
+    ckpt = str(method_runs["ours"])
+    out = tmp_path / "paths.csv"
+    played = play_trials(PlayCfg(checkpoint=ckpt, episodes=4, time_s=0.2, scene_variants=2, paths=str(out)))
+    assert [s.difficulty for s in played.scenes] == [0.0, 1.0]
+    assert sorted({t.scene for t in played.trials}) == [0, 1]
+    rows = list(csv.DictReader(out.open()))
+    assert sorted({r["trial"] for r in rows}) == ["0", "1", "2", "3"]
+    assert {(r["trial"], r["scene"]) for r in rows} == {(str(k), str(t.scene)) for k, t in enumerate(played.trials)}
+    with pytest.raises(ValueError, match="scene_variants must be >= 1, got 0"):
+        play_trials(PlayCfg(checkpoint=ckpt, episodes=2, scene_variants=0))
+    flat = Path(__file__).resolve().parents[1] / "checkpoints" / "flat" / "model_770.pt"
+    with pytest.raises(ValueError, match="scene_variants= counts typical variants"):
+        play_trials(PlayCfg(checkpoint=str(flat), episodes=2, scene_variants=3))

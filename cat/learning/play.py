@@ -37,6 +37,7 @@ class PlayCfg:
     sim: str = ""  # override the run's backend
     seed: int = 0  # start-pose seed of the trials (not the run's RL seed)
     scene_seed: int | None = None  # typical scenes: override the run's task.scene_seed
+    scene_variants: int | None = None  # typical scenes: override the run's task.scene_variants (Table I: 10)
     scene_dir: str = ""  # evaluate on these scene folders instead of the run's scenes
     scene_kind: str = ""  # evaluate on this typical kind's variants (a generalist: one of its task.scene_groups)
     mirror: bool = False  # evaluate on the left/right mirror images of the scenes (a lateralised policy shows)
@@ -97,6 +98,12 @@ def play_trials(cfg: PlayCfg) -> Played:
         if not cfg.warmup:
             raise ValueError("warmup_pitch= chooses the warm-up layout: it needs warmup=true")
         task = replace(task, warmup_bar_pitch=cfg.warmup_pitch)
+    if cfg.scene_variants is not None:
+        if cfg.scene_variants < 1:
+            raise ValueError(f"scene_variants must be >= 1, got {cfg.scene_variants}")
+        if cfg.scene_dir or task.scene_dir or not (task.scene_kind or task.scene_groups):
+            raise ValueError("scene_variants= counts typical variants: these trials play no typical scenes")
+        task = replace(task, scene_variants=cfg.scene_variants)
     group = run_scene_group(task, cfg.scene_seed, cfg.scene_dir, cfg.scene_kind, cfg.warmup)
     for option in ("mirror", "contacts", "clearance"):
         if getattr(cfg, option) and group is None:

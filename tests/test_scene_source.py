@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -116,6 +117,8 @@ def test_a_folder_of_links_plays_as_it_trains(tmp_path):
         (dict(scene_kind="side-pass", warmup_variants=-1), "must be >= 0"),
         (dict(scene_kind="side-pass", warmup_variants=2, warmup_bar_pitch=True), "grades multi-hurdle's warm-ups"),
         (dict(scene_kind="multi-hurdle", warmup_bar_pitch=True), "task.warmup_variants > 0"),
+        (dict(scene_kind="multi-hurdle", warmup_variants=2, warmup_bars=3), "needs task.warmup_bar_pitch=true"),
+        (dict(scene_kind="multi-hurdle", warmup_variants=2, warmup_bar_pitch=True, warmup_bars=4), "holds 2 bars"),
     ],
 )
 def test_bad_scene_keys_are_refused_everywhere(kw, match):
@@ -169,7 +172,7 @@ def test_graded_bar_pitch_reaches_training_and_the_warmup_diagnostic():
     the diagnostic refuses it for a kind it does not grade."""
     task = _task(scene_kind="multi-hurdle", scene_variants=1, warmup_variants=2, warmup_bar_pitch=True)
     source = eval_scene_source(task, warmup=True)
-    assert source == SceneSource(("multi-hurdle",), variants=0, seed=0, warmup=2, warmup_pitch=True)
+    assert source == SceneSource(("multi-hurdle",), variants=0, seed=0, warmup=2, warmup_bars=2)
     trained = [s for s in scene_set_for(task, 2).scenes if s.difficulty < 0]
     played = run_scene_group(task, warmup=True).scenes
     assert [s.mesh.bounds.tolist() for s in trained] == [s.mesh.bounds.tolist() for s in played]
@@ -177,3 +180,8 @@ def test_graded_bar_pitch_reaches_training_and_the_warmup_diagnostic():
     assert [s.mesh.bounds.tolist() for s in random.scenes] != [s.mesh.bounds.tolist() for s in played]
     with pytest.raises(ValueError, match="not 'hurdle-crouch'"):
         eval_scene_source(task, scene_kind="hurdle_crouch", warmup=True)
+    three = replace(task, warmup_variants=10, warmup_bars=3)  # task.warmup_bars reaches both as well
+    assert eval_scene_source(three, warmup=True).warmup_bars == 3
+    bars = [len(s.meta["layout"]["bar_top"]) for s in scene_set_for(three, 2).scenes if s.difficulty < 0]
+    assert bars == [len(s.meta["layout"]["bar_top"]) for s in run_scene_group(three, warmup=True).scenes]
+    assert bars[0] == 2 and bars[-1] == 3, bars

@@ -151,11 +151,11 @@ def _bar_spans(scene) -> list[tuple[float, float]]:
 
 
 def test_graded_pitch_orders_multi_hurdle_warmups_by_their_gap():
-    """``graded_pitch``: the floor gap between the two warm-up bars shrinks with d (0.85-0.90 m at d = -1 to
+    """``graded_bars=2``: the floor gap between the two warm-up bars shrinks with d (0.85-0.90 m at d = -1 to
     about 0.3 m at d = -0.1) and the bars stay on the course, whatever the seed; the paper's variants and the
     random layout are untouched by the flag."""
     for seed in range(5):
-        scenes = warmup_variants("multi-hurdle", 10, seed, graded_pitch=True)
+        scenes = warmup_variants("multi-hurdle", 10, seed, graded_bars=2)
         gaps = []
         for s in scenes:
             (a0, a1), (b0, b1) = _bar_spans(s)
@@ -168,9 +168,36 @@ def test_graded_pitch_orders_multi_hurdle_warmups_by_their_gap():
         random = warmup_variants("multi-hurdle", 10, seed)
         assert [_bar_spans(s) for s in random] != [_bar_spans(s) for s in scenes]
     for d in (0.0, 0.6):  # the paper's variants: the same with and without the flag
-        assert _bar_spans(make_typical("multi-hurdle", d, 3, graded_pitch=True)) == _bar_spans(
+        assert _bar_spans(make_typical("multi-hurdle", d, 3, graded_bars=2)) == _bar_spans(
             make_typical("multi-hurdle", d, 3)
         )
+
+
+def test_three_graded_bars_where_they_fit():
+    """``graded_bars=3``: the warm-ups whose gap leaves room for three bars on the course get a third at the same
+    gap (the last ones, gaps <= ~0.45 m), the others are the graded pairs unchanged; the paper's variants never
+    change; another count is refused."""
+    for seed in range(4):
+        pairs = warmup_variants("multi-hurdle", 10, seed, graded_bars=2)
+        threes = warmup_variants("multi-hurdle", 10, seed, graded_bars=3)
+        counts = []
+        for two, three in zip(pairs, threes, strict=True):
+            spans = _bar_spans(three)
+            counts.append(len(spans))
+            if len(spans) == 2:
+                assert spans == _bar_spans(two)
+                continue
+            gaps = [b0 - a1 for (_, a1), (b0, _) in zip(spans[:-1], spans[1:], strict=True)]
+            assert abs(gaps[0] - gaps[1]) < 0.02 and max(gaps) < 0.5, gaps  # bar widths differ by the jitter
+            assert spans[0][0] >= 0.39 and spans[-1][1] <= 1.75 + 1e-6, spans
+            assert three.meta["layout"]["bar_top"][2] < 0.09  # warm-up bars, lower than the paper's 8 cm + jitter
+        assert counts[:5] == [2] * 5 and counts[-1] == 3, (seed, counts)
+        assert counts == sorted(counts), counts  # two bars, then three: ordered by d
+    assert _bar_spans(make_typical("multi-hurdle", 0.8, 2, graded_bars=3)) == _bar_spans(
+        make_typical("multi-hurdle", 0.8, 2)
+    )
+    with pytest.raises(SceneError, match=r"graded_bars must be one of \(0, 2, 3\)"):
+        make_typical("multi-hurdle", -0.5, 0, graded_bars=4)
 
 
 def _slit_walls(scene) -> tuple[float, float, float]:

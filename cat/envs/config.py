@@ -270,6 +270,9 @@ class EnvCfg:
     # instead of random gaps, so the curriculum's levels are ordered by the pitch that sets their success
     # (cat.terrain.typical.GRADED_GAP; docs/multi_hurdle.md). Needs multi-hurdle among the kinds and warm-ups.
     warmup_bar_pitch: bool = False
+    # with warmup_bar_pitch: 3 puts a third bar at the warm-up's gap wherever three fit on the course (the last
+    # warm-ups, gaps up to ~0.4 m), a step between the graded pairs and the paper's three-bar variants.
+    warmup_bars: int = 2
     # training aid: add the left/right mirror image of every scene (cat.terrain.Scene.mirrored), so a scene set
     # that is not balanced (eight of the paper's ten side-pass variants open to the left first) cannot teach one
     # handedness only. Real experience on both sides, unlike PPO's symmetry augmentation. Never evaluated.

@@ -193,16 +193,16 @@ class SceneSet:
         mirror: bool = False,
         episodes: EpisodeCfg | None = None,
         dtype: str = "float32",
-        warmup_pitch: bool = False,
+        warmup_bars: int = 0,
     ) -> SceneSet:
         """The paper's typical scenes of ``kind`` (or of each of several kinds: one scene group per kind)
         built on the fly (no dataset needed), plus ``warmup`` training-only easier scenes per kind, and with
-        ``mirror`` the mirror image of each (``warmup_pitch``: ``EnvCfg.warmup_bar_pitch``)."""
+        ``mirror`` the mirror image of each (``warmup_bars``: the graded warm-ups' bars, ``SceneSource``)."""
         kinds = [kind] if isinstance(kind, str) else list(kind)
         scenes = [
             s
             for k in kinds
-            for s in warmup_variants(k, warmup, seed, warmup_pitch) + typical_variants(k, variants, seed)
+            for s in warmup_variants(k, warmup, seed, warmup_bars) + typical_variants(k, variants, seed)
         ]
         scenes = with_mirrors(scenes) if mirror else scenes
         load = lambda i: scene_fields(scenes[i], None, field_cfg)  # noqa: E731

@@ -37,7 +37,8 @@ class SceneSource:
     variants: int = 10  # typical: the paper's variants per kind (difficulties spread over [0, 1])
     seed: int = 0  # typical: seeds seed..seed+variants-1 (the scene seed, not the RL seed)
     warmup: int = 0  # typical: training-only warm-up variants per kind (difficulty in [-1, 0))
-    warmup_pitch: bool = False  # typical: multi-hurdle warm-ups at a graded bar pitch (EnvCfg.warmup_bar_pitch)
+    warmup_bars: int = 0  # typical: multi-hurdle warm-ups at a graded bar pitch, this many bars (0: random gaps;
+    # EnvCfg.warmup_bar_pitch, EnvCfg.warmup_bars)
     mirror: bool = False  # each scene followed by its left/right mirror image
     episodes: EpisodeCfg | None = None  # start / goal sampling (None: the scenes' start regions)
 
@@ -55,7 +56,7 @@ class SceneSource:
             self.variants,
             self.seed,
             warmup=self.warmup,
-            warmup_pitch=self.warmup_pitch,
+            warmup_bars=self.warmup_bars,
             **kw,
         )
 
@@ -97,7 +98,16 @@ def check_scene_task(task: EnvCfg) -> tuple[str | None, list[str]]:
     if task.warmup_bar_pitch and ("multi-hurdle" not in [scene_kind, *groups] or not task.warmup_variants):
         raise ValueError("task.warmup_bar_pitch grades multi-hurdle's warm-ups: needs task.scene_kind (or "
                          "scene_groups) with multi-hurdle and task.warmup_variants > 0")  # fmt: skip
+    if task.warmup_bars not in (2, 3):
+        raise ValueError(f"task.warmup_bars={task.warmup_bars}: a graded warm-up holds 2 bars, or 3 where they fit")
+    if task.warmup_bars != 2 and not task.warmup_bar_pitch:
+        raise ValueError("task.warmup_bars counts the bars of the graded warm-ups: it needs task.warmup_bar_pitch=true")
     return scene_kind, groups
+
+
+def graded_bars(task: EnvCfg) -> int:
+    """The bars of multi-hurdle's graded warm-ups (``cat.terrain.typical.make_typical``; 0: random gaps)."""
+    return task.warmup_bars if task.warmup_bar_pitch else 0
 
 
 def scene_source(task: EnvCfg) -> SceneSource | None:
@@ -117,7 +127,7 @@ def scene_source(task: EnvCfg) -> SceneSource | None:
         variants=task.scene_variants,
         seed=task.scene_seed,
         warmup=task.warmup_variants,
-        warmup_pitch=task.warmup_bar_pitch,
+        warmup_bars=graded_bars(task),
         **common,
     )
 
@@ -167,7 +177,7 @@ def eval_scene_source(
                 variants=0,
                 seed=seed,
                 warmup=task.warmup_variants,
-                warmup_pitch=task.warmup_bar_pitch,
+                warmup_bars=graded_bars(task),
             )
         return SceneSource((task.scene_kind,), variants=task.scene_variants, seed=seed)
     if warmup:

@@ -72,10 +72,10 @@ class SceneGroup:
         return cls(kind, scenes, names, [scene_fields(s, None, None) for s in scenes])
 
     @classmethod
-    def warmup(cls, kind: str, variants: int, scene_seed: int, graded_pitch: bool = False) -> SceneGroup:
+    def warmup(cls, kind: str, variants: int, scene_seed: int, graded_bars: int = 0) -> SceneGroup:
         """The training-only warm-up scenes of ``kind`` (difficulties in [-1, 0)), exactly as training builds them:
         a diagnostic of where a curriculum stands, never a headline figure."""
-        scenes = warmup_variants(kind, variants, scene_seed, graded_pitch)
+        scenes = warmup_variants(kind, variants, scene_seed, graded_bars)
         names = [f"{kind}_warmup_{i:02d}" for i in range(variants)]
         return cls(f"{kind}_warmup", scenes, names, [scene_fields(s, None, None) for s in scenes])
 
@@ -111,7 +111,7 @@ class SceneGroup:
             return SceneGroup(source.kind, *pick)
         (kind,) = source.typical
         if source.variants == 0:
-            return cls.warmup(kind, source.warmup, source.seed, source.warmup_pitch)
+            return cls.warmup(kind, source.warmup, source.seed, source.warmup_bars)
         return cls.typical(kind, source.variants, source.seed)
 
     def mirrored(self) -> SceneGroup:

@@ -40,6 +40,7 @@ NEUTRAL_DEFAULTS = {
     ("algo", "max_noise_std"): 0.0,
     ("task", "curriculum", "group_weights"): {},
     ("task", "warmup_bar_pitch"): False,
+    ("task", "warmup_bars"): 2,
     ("algo", "rehearsal"): {  # off: plain PPO
         "learning_rate": 0.0,
         "num_learning_epochs": 1,

@@ -75,12 +75,14 @@ BAR_TOP_WARMUP = 0.045  # [m]
 BAR_RADIUS_WARMUP = 0.025  # 5 cm wide at 2 cm height, 3 cm at the floor [m]
 BAR_SPAN, CEILING_SPAN = (-1.0, -0.5), (-0.5, 0.0)  # warm-up ranges of d over which bars rise, ceilings drop
 WARMUP = (-1.0, 0.0)  # the whole warm-up range: bars in scenes without a ceiling grow over all of it
-# Graded bar pitch (multi-hurdle warm-ups, ``graded_pitch``): the first bar's near edge and the floor gap between the
-# two bars shrink with d from the first to the second value (+ up to 5 cm of jitter each), instead of random gaps.
+# Graded bar pitch (multi-hurdle warm-ups, ``graded_bars``): the first bar's near edge and the floor gap between the
+# bars shrink with d from the first to the second value (+ up to 5 cm of jitter each), instead of random gaps.
 # The gap, not the bar height, sets a warm-up's success (docs/multi_hurdle.md, "The bar pitch"); the paper's
-# three-bar variants leave 0.23-0.32 m.
+# three-bar variants leave 0.23-0.32 m. With ``graded_bars=3`` a third bar follows at the same gap wherever it fits on
+# the course (gaps up to ~0.4 m: the last warm-ups), the step from two bars to the paper's three.
 GRADED_FIRST_BAR = (0.70, 0.40)  # [m] from the course origin (the start region ends at x = 0.1)
 GRADED_GAP = (0.85, 0.25)  # [m]
+GRADED_BARS = (0, 2, 3)  # bars of a graded warm-up (0: not graded, random gaps)
 
 
 def lerp(a: float, b: float, t: float) -> float:
@@ -115,9 +117,9 @@ class _Params:
     the unseen shapes (None: the paper's), apart from ``rng`` so a seed's layout is the same in both."""
 
     def __init__(
-        self, d: float, rng: np.random.Generator, srng: np.random.Generator | None = None, graded: bool = False
+        self, d: float, rng: np.random.Generator, srng: np.random.Generator | None = None, graded_bars: int = 0
     ):
-        self.d, self.rng, self.srng, self.graded = d, rng, srng, graded
+        self.d, self.rng, self.srng, self.graded_bars = d, rng, srng, graded_bars
         self.layout: dict[str, list[float]] = {}  # what ``note`` recorded: the scene's ``meta["layout"]``
 
     def note(self, name: str, value: float) -> float:
@@ -306,14 +308,25 @@ def _sequence(elements: list[Element], p: _Params, min_gap: float = 0.25) -> lis
     return parts
 
 
-def _graded_pair(p: _Params) -> list[trimesh.Trimesh]:
-    """Two warm-up bars whose first position and floor gap shrink with d (``GRADED_FIRST_BAR``, ``GRADED_GAP``)."""
-    (w1, build1), (w2, build2) = _bar(p, WARMUP), _bar(p, WARMUP)
+def _graded_bars(p: _Params) -> list[trimesh.Trimesh]:
+    """Two warm-up bars whose first position and floor gap shrink with d (``GRADED_FIRST_BAR``, ``GRADED_GAP``);
+    with ``p.graded_bars == 3`` a third at the same gap when the three fit on the course from its start."""
+    bars = [_bar(p, WARMUP), _bar(p, WARMUP)]
     t = p.d - WARMUP[0]
     x0 = lerp(*GRADED_FIRST_BAR, t) + p.rng.uniform(0.0, 0.05)
     gap = lerp(*GRADED_GAP, t) + p.rng.uniform(0.0, 0.05)
-    x0 -= max(x0 + w1 + gap + w2 - COURSE[1], 0.0)  # the second bar ends on the course
-    return build1(p.note("x", x0)) + build2(p.note("x", x0 + w1 + gap))
+    widest = max(w for w, _ in bars)
+    if p.graded_bars == 3 and COURSE[0] + 3 * widest + 2 * gap <= COURSE[1]:
+        bars.append(_bar(p, WARMUP))
+    end = x0
+    for i, (w, _) in enumerate(bars):
+        end = end + w + gap if i < len(bars) - 1 else end + w
+    x = x0 - max(end - COURSE[1], 0.0)  # the last bar ends on the course
+    parts = []
+    for w, build in bars:
+        parts += build(p.note("x", x))
+        x = x + w + gap
+    return parts
 
 
 def _corridor(p: _Params) -> list[trimesh.Trimesh]:
@@ -342,28 +355,31 @@ def _layout(kind: str, p: _Params) -> list[trimesh.Trimesh]:
         return _sequence([_slit(p, yc=off), _slit(p, yc=-off)], p, min_gap=0.45)
     if kind == "multi-hurdle":
         n = 2 if p.d < 0.5 else 3
-        if p.graded and p.d < 0:
-            return _graded_pair(p)
+        if p.graded_bars and p.d < 0:
+            return _graded_bars(p)
         return _sequence([_bar(p, WARMUP) for _ in range(n)], p, min_gap=0.3)
     raise SceneError(f"unknown typical scene type {kind!r}; valid: {', '.join(TYPICAL_KINDS)}")
 
 
 def make_typical(
-    kind: str, difficulty: float = 0.5, seed: int = 0, shapes: str = "paper", graded_pitch: bool = False
+    kind: str, difficulty: float = 0.5, seed: int = 0, shapes: str = "paper", graded_bars: int = 0
 ) -> Scene:
     """One typical scene of ``kind`` (see ``TYPICAL_KINDS``); deterministic in (kind, difficulty, seed, shapes).
 
     ``difficulty`` ∈ [0, 1] spans the paper's range; [−1, 0) is the training-only warm-up range. ``shapes``: the
     paper's building blocks, or ``unseen`` ones (module docstring; evaluation only, never a training scene).
-    ``graded_pitch``: a multi-hurdle warm-up places its bars by ``GRADED_GAP`` (the paper's variants never change).
+    ``graded_bars``: a multi-hurdle warm-up places its bars by ``GRADED_GAP``, 2 of them (or 3 where they fit;
+    0: random gaps). The paper's variants never change.
     """
     if not -1.0 <= difficulty <= 1.0:
         raise SceneError(f"difficulty must be in [-1, 1] ([0, 1] for the paper's scenes), got {difficulty}")
     if shapes not in SHAPES:
         raise SceneError(f"unknown typical shapes {shapes!r}; valid: {', '.join(SHAPES)}")
+    if graded_bars not in GRADED_BARS:
+        raise SceneError(f"graded_bars must be one of {GRADED_BARS} (0: random gaps), got {graded_bars}")
     key = [seed, TYPICAL_KINDS.index(kind) if kind in TYPICAL_KINDS else 99]
     srng = np.random.default_rng([*key, UNSEEN_SHAPES_STREAM]) if shapes == "unseen" else None
-    params = _Params(difficulty, np.random.default_rng(key), srng, graded_pitch)
+    params = _Params(difficulty, np.random.default_rng(key), srng, graded_bars)
     parts = crop_parts(_layout(kind, params), BOUNDS[0], BOUNDS[1])
     return Scene(
         mesh=combine(parts),
@@ -392,11 +408,11 @@ def typical_variants(kind: str, n: int = 10, seed: int = 0, shapes: str = "paper
 WARMUP_SEED_OFFSET = 10_000  # warm-up scenes never share a seed with the paper's variants
 
 
-def warmup_variants(kind: str, n: int, seed: int = 0, graded_pitch: bool = False) -> list[Scene]:
+def warmup_variants(kind: str, n: int, seed: int = 0, graded_bars: int = 0) -> list[Scene]:
     """``n`` training-only scenes of ``kind`` easier than the paper's easiest: difficulties −1, −1 + 1/n, …,
     −1/n (seeds ``WARMUP_SEED_OFFSET`` + seed + i), so a curriculum climbs from walking to the paper's range.
-    ``graded_pitch``: multi-hurdle's bars at a gap shrinking with d (``make_typical``)."""
+    ``graded_bars``: multi-hurdle's bars at a gap shrinking with d (``make_typical``)."""
     ds = -1.0 + np.arange(n) / max(n, 1)
     return [
-        make_typical(kind, float(d), WARMUP_SEED_OFFSET + seed + i, graded_pitch=graded_pitch) for i, d in enumerate(ds)
+        make_typical(kind, float(d), WARMUP_SEED_OFFSET + seed + i, graded_bars=graded_bars) for i, d in enumerate(ds)
     ]

@@ -21,7 +21,7 @@ from cat.envs.scene_source import (
 )
 from cat.eval.runner import run_scene_group
 from cat.run.config_file import load_run_config
-from cat.terrain import Scene, typical_variants, warmup_variants
+from cat.terrain import Graded, Scene, typical_variants, warmup_variants
 
 REPO = Path(__file__).resolve().parents[1]
 SHIPPED = sorted(p.parent for p in (REPO / "checkpoints").glob("*/config.yaml"))
@@ -118,6 +118,8 @@ def test_a_folder_of_links_plays_as_it_trains(tmp_path):
         (dict(scene_kind="side-pass", warmup_variants=2, warmup_bar_pitch=True), "grades multi-hurdle's warm-ups"),
         (dict(scene_kind="multi-hurdle", warmup_bar_pitch=True), "task.warmup_variants > 0"),
         (dict(scene_kind="multi-hurdle", warmup_variants=2, warmup_bars=3), "needs task.warmup_bar_pitch=true"),
+        (dict(scene_kind="side-pass", warmup_variants=2, warmup_slit_offset=True), "grades side-hurdle's warm-ups"),
+        (dict(scene_kind="side-hurdle", warmup_slit_offset=True), "task.warmup_variants > 0"),
         (dict(scene_kind="multi-hurdle", warmup_variants=2, warmup_bar_pitch=True, warmup_bars=4), "holds 2 bars"),
     ],
 )
@@ -172,7 +174,7 @@ def test_graded_bar_pitch_reaches_training_and_the_warmup_diagnostic():
     the diagnostic refuses it for a kind it does not grade."""
     task = _task(scene_kind="multi-hurdle", scene_variants=1, warmup_variants=2, warmup_bar_pitch=True)
     source = eval_scene_source(task, warmup=True)
-    assert source == SceneSource(("multi-hurdle",), variants=0, seed=0, warmup=2, warmup_bars=2)
+    assert source == SceneSource(("multi-hurdle",), variants=0, seed=0, warmup=2, warmup_graded=Graded(bars=2))
     trained = [s for s in scene_set_for(task, 2).scenes if s.difficulty < 0]
     played = run_scene_group(task, warmup=True).scenes
     assert [s.mesh.bounds.tolist() for s in trained] == [s.mesh.bounds.tolist() for s in played]
@@ -181,7 +183,23 @@ def test_graded_bar_pitch_reaches_training_and_the_warmup_diagnostic():
     with pytest.raises(ValueError, match="not 'hurdle-crouch'"):
         eval_scene_source(task, scene_kind="hurdle_crouch", warmup=True)
     three = replace(task, warmup_variants=10, warmup_bars=3)  # task.warmup_bars reaches both as well
-    assert eval_scene_source(three, warmup=True).warmup_bars == 3
+    assert eval_scene_source(three, warmup=True).warmup_graded == Graded(bars=3)
     bars = [len(s.meta["layout"]["bar_top"]) for s in scene_set_for(three, 2).scenes if s.difficulty < 0]
     assert bars == [len(s.meta["layout"]["bar_top"]) for s in run_scene_group(three, warmup=True).scenes]
     assert bars[0] == 2 and bars[-1] == 3, bars
+
+
+def test_graded_slit_offset_reaches_training_and_the_warmup_diagnostic():
+    """``task.warmup_slit_offset``: the training scene set and ``warmup=true`` build the same offset-slit warm-ups
+    (a generalist's other groups untouched); the diagnostic refuses it for another kind."""
+    task = _task(scene_kind="side-hurdle", scene_variants=1, warmup_variants=4, warmup_slit_offset=True)
+    assert eval_scene_source(task, warmup=True).warmup_graded == Graded(slit_offset=True)
+    trained = [s.meta["layout"] for s in scene_set_for(task, 2).scenes if s.difficulty < 0]
+    played = [s.meta["layout"] for s in run_scene_group(task, warmup=True).scenes]
+    assert trained == played and abs(played[-1]["slit_y"][0]) > 0.25 and played[0]["slit_gap"][0] < 0.5
+    mixed = _task(scene_groups=["side-hurdle", "side-pass"], scene_variants=1, warmup_variants=2)
+    plain = [s.meta["layout"] for s in scene_set_for(mixed, 2).scenes if s.kind == "side-pass"]
+    graded = replace(mixed, warmup_slit_offset=True)
+    assert plain == [s.meta["layout"] for s in scene_set_for(graded, 2).scenes if s.kind == "side-pass"]
+    with pytest.raises(ValueError, match="not 'side-pass'"):
+        eval_scene_source(replace(task, scene_kind="side-pass"), warmup=True)

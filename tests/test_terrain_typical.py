@@ -5,7 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cat.terrain import TYPICAL_KINDS, SceneError, check_scene, make_typical, typical_variants, warmup_variants
+from cat.terrain import (
+    TYPICAL_KINDS,
+    Graded,
+    SceneError,
+    check_scene,
+    make_typical,
+    typical_variants,
+    warmup_variants,
+)
 from cat.terrain.voxel import free_volume_fraction
 
 
@@ -151,11 +159,11 @@ def _bar_spans(scene) -> list[tuple[float, float]]:
 
 
 def test_graded_pitch_orders_multi_hurdle_warmups_by_their_gap():
-    """``graded_bars=2``: the floor gap between the two warm-up bars shrinks with d (0.85-0.90 m at d = -1 to
+    """``Graded(bars=2)``: the floor gap between the two warm-up bars shrinks with d (0.85-0.90 m at d = -1 to
     about 0.3 m at d = -0.1) and the bars stay on the course, whatever the seed; the paper's variants and the
     random layout are untouched by the flag."""
     for seed in range(5):
-        scenes = warmup_variants("multi-hurdle", 10, seed, graded_bars=2)
+        scenes = warmup_variants("multi-hurdle", 10, seed, Graded(bars=2))
         gaps = []
         for s in scenes:
             (a0, a1), (b0, b1) = _bar_spans(s)
@@ -168,18 +176,18 @@ def test_graded_pitch_orders_multi_hurdle_warmups_by_their_gap():
         random = warmup_variants("multi-hurdle", 10, seed)
         assert [_bar_spans(s) for s in random] != [_bar_spans(s) for s in scenes]
     for d in (0.0, 0.6):  # the paper's variants: the same with and without the flag
-        assert _bar_spans(make_typical("multi-hurdle", d, 3, graded_bars=2)) == _bar_spans(
+        assert _bar_spans(make_typical("multi-hurdle", d, 3, graded=Graded(bars=2))) == _bar_spans(
             make_typical("multi-hurdle", d, 3)
         )
 
 
 def test_three_graded_bars_where_they_fit():
-    """``graded_bars=3``: the warm-ups whose gap leaves room for three bars on the course get a third at the same
+    """``Graded(bars=3)``: the warm-ups whose gap leaves room for three bars on the course get a third at the same
     gap (the last ones, gaps <= ~0.45 m), the others are the graded pairs unchanged; the paper's variants never
     change; another count is refused."""
     for seed in range(4):
-        pairs = warmup_variants("multi-hurdle", 10, seed, graded_bars=2)
-        threes = warmup_variants("multi-hurdle", 10, seed, graded_bars=3)
+        pairs = warmup_variants("multi-hurdle", 10, seed, Graded(bars=2))
+        threes = warmup_variants("multi-hurdle", 10, seed, Graded(bars=3))
         counts = []
         for two, three in zip(pairs, threes, strict=True):
             spans = _bar_spans(three)
@@ -193,11 +201,11 @@ def test_three_graded_bars_where_they_fit():
             assert three.meta["layout"]["bar_top"][2] < 0.09  # warm-up bars, lower than the paper's 8 cm + jitter
         assert counts[:5] == [2] * 5 and counts[-1] == 3, (seed, counts)
         assert counts == sorted(counts), counts  # two bars, then three: ordered by d
-    assert _bar_spans(make_typical("multi-hurdle", 0.8, 2, graded_bars=3)) == _bar_spans(
+    assert _bar_spans(make_typical("multi-hurdle", 0.8, 2, graded=Graded(bars=3))) == _bar_spans(
         make_typical("multi-hurdle", 0.8, 2)
     )
-    with pytest.raises(SceneError, match=r"graded_bars must be one of \(0, 2, 3\)"):
-        make_typical("multi-hurdle", -0.5, 0, graded_bars=4)
+    with pytest.raises(SceneError, match=r"graded bars must be one of \(0, 2, 3\)"):
+        Graded(bars=4)
 
 
 def _slit_walls(scene) -> tuple[float, float, float]:
@@ -208,6 +216,32 @@ def _slit_walls(scene) -> tuple[float, float, float]:
     )
     lo, hi = walls[0], walls[1]
     return float(lo[0, 0]), float(hi[0, 1] - lo[1, 1]), float(hi[0, 1] + lo[1, 1]) / 2
+
+
+def test_graded_slit_offset_moves_a_narrow_slit_off_the_axis():
+    """``Graded(slit_offset=True)``: side-hurdle's warm-ups hold a 0.45-0.50 m slit whose centre leaves the axis as d
+    grows (0-3 cm at d = -1, 0.36-0.40 m at d = -0.1, both sides over the seeds), built where the layout says; the
+    paper's variants and the other types' warm-ups are untouched."""
+    graded = Graded(slit_offset=True)
+    sides = set()
+    for seed in range(4):
+        offsets = []
+        for s in warmup_variants("side-hurdle", 10, seed, graded):
+            x, gap, yc = _slit_walls(s)
+            lay = s.meta["layout"]
+            assert 0.45 - 1e-6 <= gap <= 0.50 + 1e-6 and abs(gap - lay["slit_gap"][0]) < 1e-3, (gap, lay)
+            assert abs(yc - lay["slit_y"][0]) < 1e-3 and abs(x - lay["x"][0]) < 1e-3, (x, yc, lay)
+            offsets.append(abs(yc))
+            sides.add(yc > 0)
+        assert offsets[0] <= 0.03 + 1e-6 and 0.36 - 1e-6 <= offsets[-1] <= 0.40 + 1e-6, offsets
+        assert all(b > a - 0.03 for a, b in zip(offsets[:-1], offsets[1:], strict=True)), offsets  # up to the jitter
+    assert sides == {True, False}
+    for d in (0.0, 0.7):  # the paper's variants: the same with and without it
+        assert _slit_walls(make_typical("side-hurdle", d, 2, graded=graded)) == _slit_walls(
+            make_typical("side-hurdle", d, 2)
+        )
+    other = warmup_variants("side-pass", 3, 1, graded)  # another type's warm-ups: not graded by it
+    assert [o.meta["layout"] for o in other] == [o.meta["layout"] for o in warmup_variants("side-pass", 3, 1)]
 
 
 @pytest.mark.parametrize("seed", [0, 4])

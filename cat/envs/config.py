@@ -273,6 +273,10 @@ class EnvCfg:
     # with warmup_bar_pitch: 3 puts a third bar at the warm-up's gap wherever three fit on the course (the last
     # warm-ups, gaps up to ~0.4 m), a step between the graded pairs and the paper's three-bar variants.
     warmup_bars: int = 2
+    # training aid: side-hurdle's warm-ups hold a narrow slit (0.45 m) whose centre moves off the course's axis as d
+    # grows (0 -> 0.4 m, either side), so the curriculum grades lining up with an offset slit, which the paper's
+    # variants only ask at their narrowest gaps (cat.terrain.typical.GRADED_SLIT_OFFSET; docs/results.md).
+    warmup_slit_offset: bool = False
     # training aid: add the left/right mirror image of every scene (cat.terrain.Scene.mirrored), so a scene set
     # that is not balanced (eight of the paper's ten side-pass variants open to the left first) cannot teach one
     # handedness only. Real experience on both sides, unlike PPO's symmetry augmentation. Never evaluated.

@@ -35,7 +35,7 @@ from cat.envs.episodes import EpisodeCfg, EpisodeSampler
 from cat.envs.field_source import FieldSample
 from cat.fields import Field, FieldBank, FieldCfg, Grid, SceneFields, SceneLayout, StaleFieldError, build_fields
 from cat.fields.store import STORE_FILE
-from cat.terrain import Scene, typical_variants, warmup_variants
+from cat.terrain import NOT_GRADED, Graded, Scene, typical_variants, warmup_variants
 from cat.terrain.data_groups import select
 from cat.terrain.mujoco_export import add_obstacles_to_spec
 
@@ -193,16 +193,16 @@ class SceneSet:
         mirror: bool = False,
         episodes: EpisodeCfg | None = None,
         dtype: str = "float32",
-        warmup_bars: int = 0,
+        warmup_graded: Graded = NOT_GRADED,
     ) -> SceneSet:
         """The paper's typical scenes of ``kind`` (or of each of several kinds: one scene group per kind)
         built on the fly (no dataset needed), plus ``warmup`` training-only easier scenes per kind, and with
-        ``mirror`` the mirror image of each (``warmup_bars``: the graded warm-ups' bars, ``SceneSource``)."""
+        ``mirror`` the mirror image of each (``warmup_graded``: how the warm-ups grade each type, ``Graded``)."""
         kinds = [kind] if isinstance(kind, str) else list(kind)
         scenes = [
             s
             for k in kinds
-            for s in warmup_variants(k, warmup, seed, warmup_bars) + typical_variants(k, variants, seed)
+            for s in warmup_variants(k, warmup, seed, warmup_graded) + typical_variants(k, variants, seed)
         ]
         scenes = with_mirrors(scenes) if mirror else scenes
         load = lambda i: scene_fields(scenes[i], None, field_cfg)  # noqa: E731

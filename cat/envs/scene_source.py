@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from cat.envs.config import EnvCfg
 from cat.envs.episodes import EpisodeCfg, check_episode_cfg
 from cat.envs.scene_set import SceneSet
-from cat.terrain import TYPICAL_KINDS, kind_name
+from cat.terrain import NOT_GRADED, TYPICAL_KINDS, Graded, kind_name
 from cat.terrain.data_groups import data_group
 
 
@@ -37,8 +37,7 @@ class SceneSource:
     variants: int = 10  # typical: the paper's variants per kind (difficulties spread over [0, 1])
     seed: int = 0  # typical: seeds seed..seed+variants-1 (the scene seed, not the RL seed)
     warmup: int = 0  # typical: training-only warm-up variants per kind (difficulty in [-1, 0))
-    warmup_bars: int = 0  # typical: multi-hurdle warm-ups at a graded bar pitch, this many bars (0: random gaps;
-    # EnvCfg.warmup_bar_pitch, EnvCfg.warmup_bars)
+    warmup_graded: Graded = NOT_GRADED  # typical: how the warm-ups grade each type's hard part (graded(task))
     mirror: bool = False  # each scene followed by its left/right mirror image
     episodes: EpisodeCfg | None = None  # start / goal sampling (None: the scenes' start regions)
 
@@ -56,7 +55,7 @@ class SceneSource:
             self.variants,
             self.seed,
             warmup=self.warmup,
-            warmup_bars=self.warmup_bars,
+            warmup_graded=self.warmup_graded,
             **kw,
         )
 
@@ -98,6 +97,9 @@ def check_scene_task(task: EnvCfg) -> tuple[str | None, list[str]]:
     if task.warmup_bar_pitch and ("multi-hurdle" not in [scene_kind, *groups] or not task.warmup_variants):
         raise ValueError("task.warmup_bar_pitch grades multi-hurdle's warm-ups: needs task.scene_kind (or "
                          "scene_groups) with multi-hurdle and task.warmup_variants > 0")  # fmt: skip
+    if task.warmup_slit_offset and ("side-hurdle" not in [scene_kind, *groups] or not task.warmup_variants):
+        raise ValueError("task.warmup_slit_offset grades side-hurdle's warm-ups: needs task.scene_kind (or "
+                         "scene_groups) with side-hurdle and task.warmup_variants > 0")  # fmt: skip
     if task.warmup_bars not in (2, 3):
         raise ValueError(f"task.warmup_bars={task.warmup_bars}: a graded warm-up holds 2 bars, or 3 where they fit")
     if task.warmup_bars != 2 and not task.warmup_bar_pitch:
@@ -105,9 +107,10 @@ def check_scene_task(task: EnvCfg) -> tuple[str | None, list[str]]:
     return scene_kind, groups
 
 
-def graded_bars(task: EnvCfg) -> int:
-    """The bars of multi-hurdle's graded warm-ups (``cat.terrain.typical.make_typical``; 0: random gaps)."""
-    return task.warmup_bars if task.warmup_bar_pitch else 0
+def graded(task: EnvCfg) -> Graded:
+    """How ``task``'s warm-ups grade their types (``cat.terrain.typical.Graded``): ``task.warmup_bar_pitch`` with
+    ``task.warmup_bars``, ``task.warmup_slit_offset``."""
+    return Graded(bars=task.warmup_bars if task.warmup_bar_pitch else 0, slit_offset=task.warmup_slit_offset)
 
 
 def scene_source(task: EnvCfg) -> SceneSource | None:
@@ -127,7 +130,7 @@ def scene_source(task: EnvCfg) -> SceneSource | None:
         variants=task.scene_variants,
         seed=task.scene_seed,
         warmup=task.warmup_variants,
-        warmup_bars=graded_bars(task),
+        warmup_graded=graded(task),
         **common,
     )
 
@@ -172,12 +175,14 @@ def eval_scene_source(
                 raise ValueError(f"warmup=true: the run's task {task.scene_kind!r} has no warm-up scenes")
             if task.warmup_bar_pitch and kind_name(task.scene_kind) != "multi-hurdle":
                 raise ValueError(f"the graded bar pitch is multi-hurdle's warm-up layout, not {task.scene_kind!r}'s")
+            if task.warmup_slit_offset and kind_name(task.scene_kind) != "side-hurdle":
+                raise ValueError(f"the graded slit offset is side-hurdle's warm-up layout, not {task.scene_kind!r}'s")
             return SceneSource(
                 (task.scene_kind,),
                 variants=0,
                 seed=seed,
                 warmup=task.warmup_variants,
-                warmup_bars=graded_bars(task),
+                warmup_graded=graded(task),
             )
         return SceneSource((task.scene_kind,), variants=task.scene_variants, seed=seed)
     if warmup:

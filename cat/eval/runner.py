@@ -31,7 +31,7 @@ from cat.envs.traversal_env import TraversalEnv
 from cat.envs.trial_metrics import TrialResult
 from cat.eval.trials import Trial
 from cat.fields import Field
-from cat.terrain import Scene, typical_variants, warmup_variants
+from cat.terrain import NOT_GRADED, Graded, Scene, typical_variants, warmup_variants
 
 log = logging.getLogger(__name__)
 
@@ -72,10 +72,10 @@ class SceneGroup:
         return cls(kind, scenes, names, [scene_fields(s, None, None) for s in scenes])
 
     @classmethod
-    def warmup(cls, kind: str, variants: int, scene_seed: int, graded_bars: int = 0) -> SceneGroup:
+    def warmup(cls, kind: str, variants: int, scene_seed: int, graded: Graded = NOT_GRADED) -> SceneGroup:
         """The training-only warm-up scenes of ``kind`` (difficulties in [-1, 0)), exactly as training builds them:
         a diagnostic of where a curriculum stands, never a headline figure."""
-        scenes = warmup_variants(kind, variants, scene_seed, graded_bars)
+        scenes = warmup_variants(kind, variants, scene_seed, graded)
         names = [f"{kind}_warmup_{i:02d}" for i in range(variants)]
         return cls(f"{kind}_warmup", scenes, names, [scene_fields(s, None, None) for s in scenes])
 
@@ -111,7 +111,7 @@ class SceneGroup:
             return SceneGroup(source.kind, *pick)
         (kind,) = source.typical
         if source.variants == 0:
-            return cls.warmup(kind, source.warmup, source.seed, source.warmup_bars)
+            return cls.warmup(kind, source.warmup, source.seed, source.warmup_graded)
         return cls.typical(kind, source.variants, source.seed)
 
     def mirrored(self) -> SceneGroup:

@@ -41,6 +41,7 @@ NEUTRAL_DEFAULTS = {
     ("task", "curriculum", "group_weights"): {},
     ("task", "warmup_bar_pitch"): False,
     ("task", "warmup_bars"): 2,
+    ("task", "warmup_slit_offset"): False,
     ("algo", "rehearsal"): {  # off: plain PPO
         "learning_rate": 0.0,
         "num_learning_epochs": 1,

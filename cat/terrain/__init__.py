@@ -10,7 +10,15 @@ from cat.terrain.furniture import House, make_house
 from cat.terrain.indoor import IndoorCfg, make_indoor
 from cat.terrain.procedural import ProceduralCfg, make_procedural
 from cat.terrain.scene import GOAL_HEIGHT, Scene, SceneError, check_scene, load_mesh
-from cat.terrain.typical import TYPICAL_KINDS, kind_name, make_typical, typical_variants, warmup_variants
+from cat.terrain.typical import (
+    NOT_GRADED,
+    TYPICAL_KINDS,
+    Graded,
+    kind_name,
+    make_typical,
+    typical_variants,
+    warmup_variants,
+)
 from cat.terrain.voxel import VOXEL, GridSpec, ReachCfg
 
 __all__ = [
@@ -32,6 +40,8 @@ __all__ = [
     "make_house",
     "make_indoor",
     "make_procedural",
+    "Graded",
+    "NOT_GRADED",
     "make_typical",
     "typical_variants",
     "warmup_variants",

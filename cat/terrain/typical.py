@@ -35,6 +35,7 @@ variants and every evaluation use d ∈ [0, 1].
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 import trimesh
@@ -75,14 +76,39 @@ BAR_TOP_WARMUP = 0.045  # [m]
 BAR_RADIUS_WARMUP = 0.025  # 5 cm wide at 2 cm height, 3 cm at the floor [m]
 BAR_SPAN, CEILING_SPAN = (-1.0, -0.5), (-0.5, 0.0)  # warm-up ranges of d over which bars rise, ceilings drop
 WARMUP = (-1.0, 0.0)  # the whole warm-up range: bars in scenes without a ceiling grow over all of it
-# Graded bar pitch (multi-hurdle warm-ups, ``graded_bars``): the first bar's near edge and the floor gap between the
+# Graded bar pitch (multi-hurdle warm-ups, ``Graded.bars``): the first bar's near edge and the floor gap between the
 # bars shrink with d from the first to the second value (+ up to 5 cm of jitter each), instead of random gaps.
 # The gap, not the bar height, sets a warm-up's success (docs/multi_hurdle.md, "The bar pitch"); the paper's
-# three-bar variants leave 0.23-0.32 m. With ``graded_bars=3`` a third bar follows at the same gap wherever it fits on
+# three-bar variants leave 0.23-0.32 m. With ``Graded.bars=3`` a third bar follows at the same gap wherever it fits on
 # the course (gaps up to ~0.4 m: the last warm-ups), the step from two bars to the paper's three.
 GRADED_FIRST_BAR = (0.70, 0.40)  # [m] from the course origin (the start region ends at x = 0.1)
 GRADED_GAP = (0.85, 0.25)  # [m]
 GRADED_BARS = (0, 2, 3)  # bars of a graded warm-up (0: not graded, random gaps)
+# Graded slit offset (side-hurdle warm-ups, ``Graded.slit_offset``): a slit as narrow as the paper's middle variants
+# (+ up to 5 cm) whose centre moves off the course's axis as d grows, to either side (+ up to 3 cm), ahead of a
+# warm-up bar. The paper's variants put their offsets only on their narrowest slits (``_slit``), where a policy
+# that turns side-on at the wall before lining up with the slit fails (docs/results.md, "Side-hurdle: where the
+# hard variants fail"); here the offset is the only thing that grows.
+GRADED_SLIT_GAP = 0.45  # [m]
+GRADED_SLIT_OFFSET = (0.0, 0.40)  # [m], d = -1 -> 0
+
+
+@dataclass(frozen=True)
+class Graded:
+    """How training-only warm-ups (d < 0) grade a type's hard part, instead of the default ramp: multi-hurdle's
+    bars at a pitch shrinking with d (``bars``: 2, or 3 where they fit; 0: random gaps), side-hurdle's slit moving
+    off the axis at a narrow gap (``slit_offset``). Each applies to its own type only; the paper's variants never
+    change."""
+
+    bars: int = 0
+    slit_offset: bool = False
+
+    def __post_init__(self):
+        if self.bars not in GRADED_BARS:
+            raise SceneError(f"graded bars must be one of {GRADED_BARS} (0: random gaps), got {self.bars}")
+
+
+NOT_GRADED = Graded()
 
 
 def lerp(a: float, b: float, t: float) -> float:
@@ -117,9 +143,9 @@ class _Params:
     the unseen shapes (None: the paper's), apart from ``rng`` so a seed's layout is the same in both."""
 
     def __init__(
-        self, d: float, rng: np.random.Generator, srng: np.random.Generator | None = None, graded_bars: int = 0
+        self, d: float, rng: np.random.Generator, srng: np.random.Generator | None = None, graded: Graded = NOT_GRADED
     ):
-        self.d, self.rng, self.srng, self.graded_bars = d, rng, srng, graded_bars
+        self.d, self.rng, self.srng, self.graded = d, rng, srng, graded
         self.layout: dict[str, list[float]] = {}  # what ``note`` recorded: the scene's ``meta["layout"]``
 
     def note(self, name: str, value: float) -> float:
@@ -310,13 +336,13 @@ def _sequence(elements: list[Element], p: _Params, min_gap: float = 0.25) -> lis
 
 def _graded_bars(p: _Params) -> list[trimesh.Trimesh]:
     """Two warm-up bars whose first position and floor gap shrink with d (``GRADED_FIRST_BAR``, ``GRADED_GAP``);
-    with ``p.graded_bars == 3`` a third at the same gap when the three fit on the course from its start."""
+    with ``p.graded.bars == 3`` a third at the same gap when the three fit on the course from its start."""
     bars = [_bar(p, WARMUP), _bar(p, WARMUP)]
     t = p.d - WARMUP[0]
     x0 = lerp(*GRADED_FIRST_BAR, t) + p.rng.uniform(0.0, 0.05)
     gap = lerp(*GRADED_GAP, t) + p.rng.uniform(0.0, 0.05)
     widest = max(w for w, _ in bars)
-    if p.graded_bars == 3 and COURSE[0] + 3 * widest + 2 * gap <= COURSE[1]:
+    if p.graded.bars == 3 and COURSE[0] + 3 * widest + 2 * gap <= COURSE[1]:
         bars.append(_bar(p, WARMUP))
     end = x0
     for i, (w, _) in enumerate(bars):
@@ -327,6 +353,14 @@ def _graded_bars(p: _Params) -> list[trimesh.Trimesh]:
         parts += build(p.note("x", x))
         x = x + w + gap
     return parts
+
+
+def _offset_slit(p: _Params) -> Element:
+    """A warm-up slit ``GRADED_SLIT_GAP`` wide whose centre leaves the axis as d grows (``GRADED_SLIT_OFFSET``)."""
+    gap = p.note("slit_gap", GRADED_SLIT_GAP + p.rng.uniform(0.0, 0.05))
+    side = float(p.rng.choice([-1.0, 1.0]))
+    yc = p.note("slit_y", side * (lerp(*GRADED_SLIT_OFFSET, p.d - WARMUP[0]) + p.rng.uniform(0.0, 0.03)))
+    return WALL_T, lambda x0: _slit_parts(x0, gap, yc)
 
 
 def _corridor(p: _Params) -> list[trimesh.Trimesh]:
@@ -343,6 +377,8 @@ def _layout(kind: str, p: _Params) -> list[trimesh.Trimesh]:
     if kind == "side-hurdle-crouch":
         return _sequence([_slit(p), _bar(p), _ceiling(p, (0.25, 0.4))], p)
     if kind == "side-hurdle":
+        if p.graded.slit_offset and p.d < 0:
+            return _sequence([_offset_slit(p), _bar(p, WARMUP)], p)
         return _sequence([_slit(p), _bar(p, WARMUP)], p)
     if kind == "side-crouch":
         return _sequence([_low_door(p)], p)
@@ -355,31 +391,28 @@ def _layout(kind: str, p: _Params) -> list[trimesh.Trimesh]:
         return _sequence([_slit(p, yc=off), _slit(p, yc=-off)], p, min_gap=0.45)
     if kind == "multi-hurdle":
         n = 2 if p.d < 0.5 else 3
-        if p.graded_bars and p.d < 0:
+        if p.graded.bars and p.d < 0:
             return _graded_bars(p)
         return _sequence([_bar(p, WARMUP) for _ in range(n)], p, min_gap=0.3)
     raise SceneError(f"unknown typical scene type {kind!r}; valid: {', '.join(TYPICAL_KINDS)}")
 
 
 def make_typical(
-    kind: str, difficulty: float = 0.5, seed: int = 0, shapes: str = "paper", graded_bars: int = 0
+    kind: str, difficulty: float = 0.5, seed: int = 0, shapes: str = "paper", graded: Graded = NOT_GRADED
 ) -> Scene:
     """One typical scene of ``kind`` (see ``TYPICAL_KINDS``); deterministic in (kind, difficulty, seed, shapes).
 
     ``difficulty`` ∈ [0, 1] spans the paper's range; [−1, 0) is the training-only warm-up range. ``shapes``: the
     paper's building blocks, or ``unseen`` ones (module docstring; evaluation only, never a training scene).
-    ``graded_bars``: a multi-hurdle warm-up places its bars by ``GRADED_GAP``, 2 of them (or 3 where they fit;
-    0: random gaps). The paper's variants never change.
+    ``graded``: how a warm-up grades its type's hard part (``Graded``); the paper's variants never change.
     """
     if not -1.0 <= difficulty <= 1.0:
         raise SceneError(f"difficulty must be in [-1, 1] ([0, 1] for the paper's scenes), got {difficulty}")
     if shapes not in SHAPES:
         raise SceneError(f"unknown typical shapes {shapes!r}; valid: {', '.join(SHAPES)}")
-    if graded_bars not in GRADED_BARS:
-        raise SceneError(f"graded_bars must be one of {GRADED_BARS} (0: random gaps), got {graded_bars}")
     key = [seed, TYPICAL_KINDS.index(kind) if kind in TYPICAL_KINDS else 99]
     srng = np.random.default_rng([*key, UNSEEN_SHAPES_STREAM]) if shapes == "unseen" else None
-    params = _Params(difficulty, np.random.default_rng(key), srng, graded_bars)
+    params = _Params(difficulty, np.random.default_rng(key), srng, graded)
     parts = crop_parts(_layout(kind, params), BOUNDS[0], BOUNDS[1])
     return Scene(
         mesh=combine(parts),
@@ -408,11 +441,9 @@ def typical_variants(kind: str, n: int = 10, seed: int = 0, shapes: str = "paper
 WARMUP_SEED_OFFSET = 10_000  # warm-up scenes never share a seed with the paper's variants
 
 
-def warmup_variants(kind: str, n: int, seed: int = 0, graded_bars: int = 0) -> list[Scene]:
+def warmup_variants(kind: str, n: int, seed: int = 0, graded: Graded = NOT_GRADED) -> list[Scene]:
     """``n`` training-only scenes of ``kind`` easier than the paper's easiest: difficulties −1, −1 + 1/n, …,
     −1/n (seeds ``WARMUP_SEED_OFFSET`` + seed + i), so a curriculum climbs from walking to the paper's range.
-    ``graded_bars``: multi-hurdle's bars at a gap shrinking with d (``make_typical``)."""
+    ``graded``: how they grade the type's hard part (``Graded``)."""
     ds = -1.0 + np.arange(n) / max(n, 1)
-    return [
-        make_typical(kind, float(d), WARMUP_SEED_OFFSET + seed + i, graded_bars=graded_bars) for i, d in enumerate(ds)
-    ]
+    return [make_typical(kind, float(d), WARMUP_SEED_OFFSET + seed + i, graded=graded) for i, d in enumerate(ds)]

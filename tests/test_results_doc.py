@@ -7,8 +7,8 @@ import subprocess
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-QUOTED = re.compile(r"checkpoints/[A-Za-z0-9_]+/model_\d+\.pt")
-IN_GIT = re.compile(r"git show ([0-9a-f]{7,40}):(checkpoints/[A-Za-z0-9_]+/model_\d+\.pt)")
+QUOTED = re.compile(r"checkpoints/[A-Za-z0-9_/.-]+?/model_\d+\.pt")  # any depth: checkpoints/table1/<cell>/seed<k>/
+IN_GIT = re.compile(r"git show ([0-9a-f]{7,40}):(checkpoints/[A-Za-z0-9_/.-]+?/model_\d+\.pt)")
 
 
 def test_quoted_checkpoints_exist_or_name_their_commit():

@@ -19,7 +19,7 @@ from typing import Any
 
 from omegaconf import OmegaConf
 
-from cat.errors import CliError
+from cat.errors import CliError, SetupError
 
 log = logging.getLogger("cat")
 
@@ -136,7 +136,7 @@ def run(script: Script, argv: list[str]) -> int:
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     from cat.launcher import LauncherError
 
-    err_types = (CliError, LauncherError, *script.errors)
+    err_types = (CliError, SetupError, LauncherError, *script.errors)
     try:
         flags, overrides = _split(argv)
         if flags["help"]:

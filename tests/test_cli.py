@@ -187,3 +187,20 @@ def test_plot_training_draws_a_chain_of_runs_over_env_steps(tmp_path, caplog):
         assert mod.main([f"run={dirs[0]}", f"runs=[{dirs[1]}]", f"out={out}"]) == 2
     errors = [r.getMessage() for r in caplog.records if r.levelno >= logging.ERROR]
     assert "needs out=" in errors[0] and "one of them" in errors[1], errors
+
+
+def test_a_missing_robot_model_is_one_line_from_any_script(tmp_path, monkeypatch, caplog):
+    """Without the robot model (MENAGERIE_ROOT naming an empty folder, offline) a script prints one line naming
+    MENAGERIE_ROOT and exits 2 (``cat.errors.SetupError``), instead of a stack trace from deep in the env."""
+    from cat.errors import SetupError
+
+    monkeypatch.setenv("MENAGERIE_ROOT", str(tmp_path))
+    play = _script("play")
+    with caplog.at_level(logging.ERROR):
+        code = play.main([f"checkpoint={REPO / 'checkpoints' / 'flat' / 'model_770.pt'}", "episodes=1"])
+    assert code == 2
+    errors = [r for r in caplog.records if r.levelno >= logging.ERROR]
+    assert len(errors) == 1 and "MENAGERIE_ROOT" in errors[0].getMessage() and not errors[0].exc_info
+    from cat.envs.robot import MenagerieModelError
+
+    assert issubclass(MenagerieModelError, SetupError)

@@ -20,6 +20,7 @@ import numpy as np
 import yaml
 
 from cat.envs.sim.base import write_pd_gains
+from cat.errors import SetupError
 from cat.terrain.mujoco_export import OBSTACLE_BIT, OBSTACLE_BODY  # noqa: F401  (the one definition, re-exported)
 
 FLOOR_BIT = 2
@@ -27,7 +28,7 @@ QUERY_SITE_PREFIX = "query_"
 ROBOT_CFG_PATH = Path(__file__).resolve().parents[2] / "robots" / "g1" / "g1.yaml"
 
 
-class MenagerieModelError(RuntimeError):
+class MenagerieModelError(SetupError):
     """The menagerie robot model could not be found or downloaded."""
 
 

@@ -29,7 +29,8 @@ bar kept its crouched, foot-dragging gait and every bar contact was a foot landi
 docs/results.md. A 5 cm strip fits between a walking gait's footprints by chance, a 16 cm one only when steps are
 placed for it, so the width gives the curriculum its first successes.) They are training-only warm-up scenes
 (``warmup_variants``) that let a difficulty curriculum start where a walking policy already succeeds; the paper's
-variants and every evaluation use d ∈ [0, 1].
+variants and every evaluation use d ∈ [0, 1]. ``Graded`` swaps a type's warm-up ramp for a ladder of the skill its
+hard variants need (multi-hurdle: the bar pitch, a third bar; side-hurdle: the slit's offset at a narrow gap).
 """
 
 from __future__ import annotations

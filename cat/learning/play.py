@@ -114,10 +114,10 @@ def play_trials(cfg: PlayCfg) -> Played:
         raise ValueError(f"time_s must be > 0, got {cfg.time_s}")
     if cfg.num_envs is not None and cfg.num_envs < 1:
         raise ValueError(f"num_envs must be >= 1 (or left out for min(episodes, 64)), got {cfg.num_envs}")
-    if cfg.record and not Path(cfg.record).resolve().parent.is_dir():
-        raise ValueError(f"record={cfg.record}: folder {Path(cfg.record).resolve().parent} does not exist")
-    if cfg.paths and not Path(cfg.paths).resolve().parent.is_dir():
-        raise ValueError(f"paths={cfg.paths}: folder {Path(cfg.paths).resolve().parent} does not exist")
+    for key in ("record", "paths"):  # output files: their folder must exist before anything is built
+        out = getattr(cfg, key)
+        if out and not Path(out).resolve().parent.is_dir():
+            raise ValueError(f"{key}={out}: folder {Path(out).resolve().parent} does not exist")
     opts = EvalCfg(seed=cfg.seed, success=replace(EvalCfg().success, time_s=cfg.time_s))
     yaw = opts.start_yaw_range
     if group is None:

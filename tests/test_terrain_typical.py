@@ -14,6 +14,7 @@ from cat.terrain import (
     typical_variants,
     warmup_variants,
 )
+from cat.terrain.typical import GRADED_BY, graded_kinds
 from cat.terrain.voxel import free_volume_fraction
 
 
@@ -242,6 +243,19 @@ def test_graded_slit_offset_moves_a_narrow_slit_off_the_axis():
         )
     other = warmup_variants("side-pass", 3, 1, graded)  # another type's warm-ups: not graded by it
     assert [o.meta["layout"] for o in other] == [o.meta["layout"] for o in warmup_variants("side-pass", 3, 1)]
+
+
+@pytest.mark.parametrize("field", sorted(GRADED_BY))
+def test_each_grading_changes_the_warmups_of_the_type_it_names(field):
+    """``GRADED_BY`` (what the config checks read) is true to the scenes: a grading changes its own type's warm-ups
+    and no other type's."""
+    graded = Graded(**{field: 2 if field == "bars" else True})
+    ((key, kind),) = graded_kinds(graded).items()
+    assert (kind, key) == GRADED_BY[field]
+    for other in TYPICAL_KINDS:
+        a = [s.meta["layout"] for s in warmup_variants(other, 3, 1, graded)]
+        b = [s.meta["layout"] for s in warmup_variants(other, 3, 1)]
+        assert (a != b) == (other == kind), other
 
 
 @pytest.mark.parametrize("seed", [0, 4])

@@ -24,6 +24,7 @@ from cat.envs.episodes import EpisodeCfg, check_episode_cfg
 from cat.envs.scene_set import SceneSet
 from cat.terrain import NOT_GRADED, TYPICAL_KINDS, Graded, kind_name
 from cat.terrain.data_groups import data_group
+from cat.terrain.typical import GRADED_BARS, graded_kinds
 
 
 @dataclass(frozen=True)
@@ -94,16 +95,15 @@ def check_scene_task(task: EnvCfg) -> tuple[str | None, list[str]]:
     check_episode_cfg(task.episodes)
     if task.warmup_variants and task.scene_dir:
         raise ValueError("task.warmup_variants builds typical scenes: it cannot be used with task.scene_dir")
-    if task.warmup_bar_pitch and ("multi-hurdle" not in [scene_kind, *groups] or not task.warmup_variants):
-        raise ValueError("task.warmup_bar_pitch grades multi-hurdle's warm-ups: needs task.scene_kind (or "
-                         "scene_groups) with multi-hurdle and task.warmup_variants > 0")  # fmt: skip
-    if task.warmup_slit_offset and ("side-hurdle" not in [scene_kind, *groups] or not task.warmup_variants):
-        raise ValueError("task.warmup_slit_offset grades side-hurdle's warm-ups: needs task.scene_kind (or "
-                         "scene_groups) with side-hurdle and task.warmup_variants > 0")  # fmt: skip
-    if task.warmup_bars not in (2, 3):
+    bars = [b for b in GRADED_BARS if b]  # 0 is "not graded": the config says that with warmup_bar_pitch=false
+    if task.warmup_bars not in bars:
         raise ValueError(f"task.warmup_bars={task.warmup_bars}: a graded warm-up holds 2 bars, or 3 where they fit")
     if task.warmup_bars != 2 and not task.warmup_bar_pitch:
         raise ValueError("task.warmup_bars counts the bars of the graded warm-ups: it needs task.warmup_bar_pitch=true")
+    for key, kind in graded_kinds(graded(task)).items():
+        if kind not in [scene_kind, *groups] or not task.warmup_variants:
+            raise ValueError(f"{key} grades {kind}'s warm-ups: needs task.scene_kind (or scene_groups) with "
+                             f"{kind} and task.warmup_variants > 0")  # fmt: skip
     return scene_kind, groups
 
 
@@ -173,10 +173,9 @@ def eval_scene_source(
         if warmup:
             if task.warmup_variants < 1:
                 raise ValueError(f"warmup=true: the run's task {task.scene_kind!r} has no warm-up scenes")
-            if task.warmup_bar_pitch and kind_name(task.scene_kind) != "multi-hurdle":
-                raise ValueError(f"the graded bar pitch is multi-hurdle's warm-up layout, not {task.scene_kind!r}'s")
-            if task.warmup_slit_offset and kind_name(task.scene_kind) != "side-hurdle":
-                raise ValueError(f"the graded slit offset is side-hurdle's warm-up layout, not {task.scene_kind!r}'s")
+            for key, kind in graded_kinds(graded(task)).items():
+                if kind_name(task.scene_kind) != kind:
+                    raise ValueError(f"{key} grades {kind}'s warm-ups, not {task.scene_kind!r}'s")
             return SceneSource(
                 (task.scene_kind,),
                 variants=0,

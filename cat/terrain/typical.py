@@ -110,6 +110,17 @@ class Graded:
 
 
 NOT_GRADED = Graded()
+# The one typical type each ``Graded`` field grades, and the task key that turns it on: what both the training set's
+# and the warm-up diagnostic's checks read (cat.envs.scene_source), so a third grading is one more row here.
+GRADED_BY = {
+    "bars": ("multi-hurdle", "task.warmup_bar_pitch"),
+    "slit_offset": ("side-hurdle", "task.warmup_slit_offset"),
+}
+
+
+def graded_kinds(graded: Graded) -> dict[str, str]:
+    """The gradings ``graded`` turns on: its task key -> the typical type whose warm-ups it changes."""
+    return {key: kind for field, (kind, key) in GRADED_BY.items() if getattr(graded, field)}
 
 
 def lerp(a: float, b: float, t: float) -> float:

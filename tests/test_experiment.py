@@ -162,6 +162,8 @@ def test_bad_experiment_one_line_nothing_written(tmp_path, caplog, cells, extra,
         ({"methods": {"Ours": ["a"]}}, "needs table1:, table2: and/or table3:"),
         ({"methods": {"Ours": ["a"]}, "table1": {}, "perception": "lidar", "live_workers": 0}, "live_workers must"),
         ({"methods": {"Ours": ["a"]}, "table1": {}, "live_workers": 2}, "needs perception: lidar"),
+        ({"methods": {"Ours": {"manifest": "/no/such.yaml"}}, "table1": {}}, "manifest not found: /no/such.yaml"),
+        ({"methods": {"No": {"manifest": str(REPO / "configs/eval/table1.yaml")}}, "table1": {}}, "no row 'No'"),
     ],
 )
 def test_bad_table_one_line_nothing_written(tmp_path, caplog, table, needle):
@@ -169,6 +171,22 @@ def test_bad_table_one_line_nothing_written(tmp_path, caplog, table, needle):
     code, errors = _experiment([f"experiment={exp}", f"root={tmp_path / 'exps'}"], caplog)
     assert code == 2 and len(errors) == 1 and needle in errors[0], errors
     assert not (tmp_path / "exps").exists()
+
+
+def test_a_row_from_an_eval_manifest_is_that_manifests_row(tmp_path, monkeypatch):
+    """``{manifest: <eval manifest>}`` reads the row of the same name there, so a hand-picked row is defined once."""
+    from cat.experiment.spec import load_experiment
+
+    monkeypatch.chdir(REPO)
+    manifest = tmp_path / "picked.yaml"
+    row = {"crouch-pass": ["checkpoints/crouch_pass/model_599.pt"]}
+    manifest.write_text(yaml.safe_dump({"methods": {"Picked": row, "Other": ["a"]}, "table1": {}}))
+    table = {"methods": {"Picked": {"manifest": str(manifest)}, "Ours": ["a"]}, "table1": {}}
+    spec = load_experiment(_write(tmp_path, {"a": {"iterations": 1}}, {"t": table}))
+    assert spec.tables["t"].methods == {"Picked": row, "Ours": ["a"]}
+    assert sorted(spec.tables["t"].references()) == ["a", "checkpoints/crouch_pass/model_599.pt"]
+    shipped = load_experiment("table1").tables["specialists"].methods["Ours (specialists)"]
+    assert shipped == yaml.safe_load((REPO / "configs/eval/table1.yaml").read_text())["methods"]["Ours (specialists)"]
 
 
 def test_live_workers_reach_the_table_command_but_not_its_hash(tmp_path, capsys, caplog):

@@ -26,6 +26,9 @@ tables:
     table1: {scene_seed: 0}
     trials_per_scene: 10     # also seed:, max_envs:, sim:
     equal_budget: [Ours]     # rows that may differ only in method (check_equal_budget)
+  picked:
+    methods: {Ours (specialists): {manifest: configs/eval/table1.yaml}}   # that manifest's row of this name
+    table1: {scene_seed: 0}
 ```
 
 Everything is checked on load (``ExperimentError``, one line naming the entry): unknown keys, a budget that is
@@ -233,6 +236,7 @@ def _table(name: str, raw: dict) -> Table:
     _check_keys(what, raw, Table)
     if not isinstance(raw.get("methods"), dict) or not raw["methods"]:
         raise ExperimentError(f"{what}: needs methods: {{row: [cells or checkpoints]}}")
+    raw = {**raw, "methods": {row: _manifest_row(what, row, e) for row, e in raw["methods"].items()}}
     for row, entries in raw["methods"].items():
         columns = entries.values() if isinstance(entries, dict) else [entries]
         if not all(isinstance(c, list) and c and all(isinstance(e, str) for e in c) for c in columns):
@@ -253,6 +257,21 @@ def _table(name: str, raw: dict) -> Table:
         if row not in raw["methods"]:
             raise ExperimentError(f"{what}: equal_budget names {row!r}, not a row; rows: {', '.join(raw['methods'])}")
     return Table(name=name, **{**raw, "equal_budget": [str(r) for r in rows]})
+
+
+def _manifest_row(what: str, row: str, entries):
+    """A row given as ``{manifest: configs/eval/<name>.yaml}`` is that eval manifest's row of the same name, so a row
+    chosen by hand (the specialists, each cell picked on a selection set) has one definition; other rows as given."""
+    if not (isinstance(entries, dict) and set(entries) == {"manifest"}):
+        return entries
+    path = Path(str(entries["manifest"]))
+    if not path.is_file():
+        raise ExperimentError(f"{what}: row {row!r}: manifest not found: {path}")
+    methods = (yaml.safe_load(path.read_text()) or {}).get("methods")
+    if not isinstance(methods, dict) or row not in methods:
+        rows = ", ".join(methods) if isinstance(methods, dict) else "none"
+        raise ExperimentError(f"{what}: row {row!r}: {path} has no row {row!r}; its rows: {rows}")
+    return methods[row]
 
 
 EQUAL_KEYS = ("task", "algo", "init", "overrides", "iterations", "env_steps", "legs")

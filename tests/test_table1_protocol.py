@@ -22,7 +22,7 @@ def _row_cell(table, row: str, column: str = "crouch-pass") -> str:
     return table.methods[row][column][0]
 
 
-COLUMNS = {"crouch-pass": "crouch_pass", "side-crouch": "side_crouch"}  # column -> its task
+COLUMNS = {"crouch-pass": "crouch_pass", "side-crouch": "side_crouch", "side-pass": "side_pass"}  # -> its task
 
 
 def test_every_row_has_the_same_budget_scenes_prior_and_trials():
@@ -47,15 +47,17 @@ def test_every_row_has_the_same_budget_scenes_prior_and_trials():
     assert methods == {"ours", "wo_obs_field", "wo_r_field", "astraversal", "humanoid_parkour"}
 
 
-def test_the_second_column_continues_each_rows_own_first_column_run():
-    """side-crouch: every row's cell starts from that row's own crouch-pass cell (same seed) for 25 M more env steps."""
+@pytest.mark.parametrize("column,before", [("side-crouch", "crouch-pass"), ("side-pass", "side-crouch")])
+def test_a_later_column_continues_each_rows_own_run_of_the_column_before(column, before):
+    """Every row's cell starts from that row's own cell of the column before (same seed) for 25 M more env steps."""
     exp = load_experiment("table1")
     table = exp.tables["table1"]
     plan = Plan(exp, root="/nonexistent")
     for row in ROWS:
-        cell = exp.cells[_row_cell(table, row, "side-crouch")]
-        first = _row_cell(table, row)
-        assert cell.init == first and cell.task == "side_crouch" and cell.method == exp.cells[first].method
+        cell = exp.cells[_row_cell(table, row, column)]
+        first = _row_cell(table, row, before)
+        assert cell.init == first and cell.task == COLUMNS[column] and cell.method == exp.cells[first].method
+        assert set(cell.seeds) <= set(exp.cells[first].seeds)  # each seed continues its own run
         assert cell.env_steps == 25_000_000 and cell.overrides == ["task.mirror_scenes=true"]
         for seed in cell.seeds:
             unit = plan.units[f"{cell.name}@{seed}"]
@@ -114,7 +116,7 @@ def _variant(tmp_path, edit) -> str:
         (lambda r: (r["cells"]["ours_crouch_pass"].pop("env_steps"), r["cells"]["ours_crouch_pass"].update(minutes=60)),
          r"row 'Ours' \(cell ours_crouch_pass\) has a minutes budget"),
         (lambda r: r["tables"]["table1"]["methods"].update({"Ours": ["ours_crouch_pass"]}),
-         r"row 'Ours' \(one cell\) is not shaped like row 'ASTraversal' \(types \['crouch-pass', 'side-crouch'\]\)"),
+         r"row 'Ours' \(one cell\) is not shaped like row 'ASTraversal' \(types \['crouch-pass', 'side-crouch', 's"),
         (lambda r: r["tables"]["table1"]["methods"].update(
             {"Ours": {"crouch-pass": ["ours_crouch_pass", "wo_r_field_crouch_pass"]}}),
          r"row 'Ours', column 'crouch-pass', must be one cell"),

@@ -162,3 +162,47 @@ def test_foot_sole_barrier_sees_a_toe_the_sole_centre_does_not():
     assert got > 2.0 and got > 3 * float(centre_only)
     env.step(torch.zeros(1, env.num_actions))
     assert env.episode_sums["foot_sole_barrier"][0] < 0
+
+
+def test_shin_barrier_sees_a_shank_over_the_bar_the_knee_point_does_not():
+    """Shin points from MuJoCo's own kinematics (between the knee and foot query sites), the bar's SDF analytic: the
+    term matches, and it is large where the knee's query point, at the joint above the bar, sees nothing."""
+    scenes = SceneSet.typical("hurdle-pass", num_envs=1, variants=1)
+    cfg = EnvCfg(num_envs=1, scene_kind="hurdle-pass", noise=NoiseCfg(enabled=False))
+    cfg.rewards.shin_barrier = -2.0
+    env = TraversalEnv(cfg, sim="mujoco", scenes=scenes, seed=1)
+    v = np.asarray(scenes.mesh_for_env(0).vertices)
+    bar = v[(v[:, 2] > 1e-3) & (v[:, 2] < 0.4)]
+    xc, r = 0.5 * (bar[:, 0].min() + bar[:, 0].max()), 0.5 * (bar[:, 0].max() - bar[:, 0].min())
+    zc = bar[:, 2].max() - r
+    knee_k = [q.name for q in env.robot.query_links].index("left_knee")
+    qpos, qvel = env.sim.qpos.clone(), env.sim.qvel.clone()
+    qpos[0, 3:7] = torch.tensor([1.0, 0.0, 0.0, 0.0], dtype=qpos.dtype)
+    env.sim.reset(torch.tensor([0]), qpos, qvel)
+    env._update_state()
+    qpos[0, 0] += xc - float(env.state.link_pos[0, knee_k, 0])  # the left shank straight above the bar's axis
+    env.sim.reset(torch.tensor([0]), qpos, qvel)
+    env._update_state()
+    env._update_field()
+
+    m = env.sim.model
+    d = mujoco.MjData(m)
+    d.qpos[:] = qpos[0].numpy()
+    mujoco.mj_forward(m, d)
+    sites = env.robot.query_site_names
+    names = [q.name for q in env.robot.query_links]
+    p = cfg.rewards.params
+    expect = 0.0
+    for side in ("left", "right"):
+        knee = d.site_xpos[m.site(sites[names.index(f"{side}_knee")]).id]
+        foot = d.site_xpos[m.site(sites[names.index(f"{side}_foot")]).id]
+        for f in rew.SHIN_FRACTIONS:
+            x, _, z = knee + f * (foot - knee)
+            dist = math.hypot(x - xc, z - zc) - r - p.shin_radius
+            expect += math.log1p(math.exp((p.shin_margin - dist) / p.barrier_width))
+    got = float(rew.shin_barrier(env, p.shin_margin, p.shin_radius, p.barrier_width)[0])
+    assert got == pytest.approx(expect, rel=0.15), (got, expect)
+    knee_only = F.softplus((p.barrier_margin - env.field.sdf[0, knee_k]) / p.barrier_width)
+    assert got > 2.0 and got > 10 * float(knee_only)
+    env.step(torch.zeros(1, env.num_actions))
+    assert env.episode_sums["shin_barrier"][0] < 0

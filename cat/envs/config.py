@@ -179,6 +179,8 @@ class RewardParamsCfg:
     barrier_margin: float = 0.05  # sdf_barrier: softplus((margin - d) / width) at each query link [m]
     barrier_width: float = 0.02  # [m]; map_clearance uses the same margin and width on the elevation map
     sole_margin: float = 0.02  # foot_sole_barrier: softplus((margin - d) / barrier_width) at each heel and toe [m]
+    shin_margin: float = 0.02  # shin_barrier: softplus((margin - d + shin_radius) / barrier_width) along each shin [m]
+    shin_radius: float = 0.045  # the G1 shank's half-thickness about the knee-foot axis (its mesh: 4.8 x 5.7 cm) [m]
     # track_heading's gate (cat.envs.mdp.rewards.HEADING_GATES): "field" = free wherever a query link is within
     # heading_clearance of an obstacle by HumanoidPF's SDF (ours); "none" = always tracked (reads no field)
     heading_gate: str = "field"
@@ -206,6 +208,7 @@ class RewardCfg:
     knee_straight: float = -0.1
     sdf_barrier: float = -2.0  # obstacle proximity at the 13 links (anticipatory; the release used -20 at 11 sites)
     foot_sole_barrier: float = 0.0  # the same barrier at each foot's heel and toe (hurdles: feet landing on bars)
+    shin_barrier: float = 0.0  # the same barrier along each shin, below the knee's query point (hurdles: shin grazes)
     map_clearance: float = 0.0  # ASTraversal's obstacle avoidance: the same barrier on elevation-map clearance
     collision: float = -5.0  # per control step with robot-obstacle contact at any substep
     termination: float = -20.0

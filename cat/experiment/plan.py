@@ -42,6 +42,9 @@ NEUTRAL_DEFAULTS = {
     ("task", "warmup_bar_pitch"): False,
     ("task", "warmup_bars"): 2,
     ("task", "warmup_slit_offset"): False,
+    ("task", "rewards", "shin_barrier"): 0.0,
+    ("task", "rewards", "params", "shin_margin"): 0.02,
+    ("task", "rewards", "params", "shin_radius"): 0.045,
     ("algo", "rehearsal"): {  # off: plain PPO
         "learning_rate": 0.0,
         "num_learning_epochs": 1,

@@ -118,34 +118,43 @@ def test_foot_clearance_min_only_lets_feet_clear_a_hurdle(flat_env):
     assert (rew.feet_clearance(env, **params) > 0).any()
 
 
-def test_foot_sole_barrier_sees_a_toe_the_sole_centre_does_not():
-    """Heel and toe points from MuJoCo's own kinematics, SDF of the bar computed analytically (a cylinder along
-    y): the term matches, and it is large where the sole-centre barrier is small (toe over the bar's edge)."""
+def _bar_pose(term: str, shift):
+    """A 1-env hurdle-pass env with ``term`` on, the robot upright and moved along x by ``shift(env, bar)`` (``bar``:
+    the bar's analytic cylinder along y, ``(xc, zc, r)``), its state and field updated; and MuJoCo's data at that pose.
+    """
     scenes = SceneSet.typical("hurdle-pass", num_envs=1, variants=1)
     cfg = EnvCfg(num_envs=1, scene_kind="hurdle-pass", noise=NoiseCfg(enabled=False))
-    cfg.rewards.foot_sole_barrier = -2.0
+    setattr(cfg.rewards, term, -2.0)
     env = TraversalEnv(cfg, sim="mujoco", scenes=scenes, seed=1)
     v = np.asarray(scenes.mesh_for_env(0).vertices)
     bar = v[(v[:, 2] > 1e-3) & (v[:, 2] < 0.4)]  # the corridor's boxes have no vertex between floor and top
     xc, r = 0.5 * (bar[:, 0].min() + bar[:, 0].max()), 0.5 * (bar[:, 0].max() - bar[:, 0].min())
-    zc = bar[:, 2].max() - r
-    # stand so that the toes (10 cm ahead of the sole centre) reach 3 cm into the bar's footprint
+    cylinder = (xc, bar[:, 2].max() - r, r)
     qpos, qvel = env.sim.qpos.clone(), env.sim.qvel.clone()
     qpos[0, 3:7] = torch.tensor([1.0, 0.0, 0.0, 0.0], dtype=qpos.dtype)
     env.sim.reset(torch.tensor([0]), qpos, qvel)
     env._update_state()
-    shift = (xc - r + 0.03) - (float(env.state.foot_pos[0, 0, 0]) + env.robot.foot_sole[1])
-    qpos[0, 0] += shift
+    qpos[0, 0] += shift(env, cylinder)
     env.sim.reset(torch.tensor([0]), qpos, qvel)
     env._update_state()
     env._update_field()
-
-    m = env.sim.model
-    d = mujoco.MjData(m)
+    d = mujoco.MjData(env.sim.model)
     d.qpos[:] = qpos[0].numpy()
-    mujoco.mj_forward(m, d)
+    mujoco.mj_forward(env.sim.model, d)
+    return env, cylinder, d
+
+
+def test_foot_sole_barrier_sees_a_toe_the_sole_centre_does_not():
+    """Heel and toe points from MuJoCo's own kinematics, SDF of the bar computed analytically (a cylinder along
+    y): the term matches, and it is large where the sole-centre barrier is small (toe over the bar's edge)."""
+
+    def toes_in(env, bar):  # the toes (10 cm ahead of the sole centre) 3 cm into the bar's footprint
+        return (bar[0] - bar[2] + 0.03) - (float(env.state.foot_pos[0, 0, 0]) + env.robot.foot_sole[1])
+
+    env, (xc, zc, r), d = _bar_pose("foot_sole_barrier", toes_in)
+    m = env.sim.model
     expect = 0.0
-    p = cfg.rewards.params
+    p = env.cfg.rewards.params
     for k, foot in enumerate(env.robot.feet):
         axis = d.xmat[m.body(foot).id].reshape(3, 3)[:, 0]
         torch.testing.assert_close(
@@ -167,31 +176,16 @@ def test_foot_sole_barrier_sees_a_toe_the_sole_centre_does_not():
 def test_shin_barrier_sees_a_shank_over_the_bar_the_knee_point_does_not():
     """Shin points from MuJoCo's own kinematics (between the knee and foot query sites), the bar's SDF analytic: the
     term matches, and it is large where the knee's query point, at the joint above the bar, sees nothing."""
-    scenes = SceneSet.typical("hurdle-pass", num_envs=1, variants=1)
-    cfg = EnvCfg(num_envs=1, scene_kind="hurdle-pass", noise=NoiseCfg(enabled=False))
-    cfg.rewards.shin_barrier = -2.0
-    env = TraversalEnv(cfg, sim="mujoco", scenes=scenes, seed=1)
-    v = np.asarray(scenes.mesh_for_env(0).vertices)
-    bar = v[(v[:, 2] > 1e-3) & (v[:, 2] < 0.4)]
-    xc, r = 0.5 * (bar[:, 0].min() + bar[:, 0].max()), 0.5 * (bar[:, 0].max() - bar[:, 0].min())
-    zc = bar[:, 2].max() - r
-    knee_k = [q.name for q in env.robot.query_links].index("left_knee")
-    qpos, qvel = env.sim.qpos.clone(), env.sim.qvel.clone()
-    qpos[0, 3:7] = torch.tensor([1.0, 0.0, 0.0, 0.0], dtype=qpos.dtype)
-    env.sim.reset(torch.tensor([0]), qpos, qvel)
-    env._update_state()
-    qpos[0, 0] += xc - float(env.state.link_pos[0, knee_k, 0])  # the left shank straight above the bar's axis
-    env.sim.reset(torch.tensor([0]), qpos, qvel)
-    env._update_state()
-    env._update_field()
 
+    def shank_over(env, bar):  # the left shank straight above the bar's axis
+        return bar[0] - float(env.state.link_pos[0, [q.name for q in env.robot.query_links].index("left_knee"), 0])
+
+    env, (xc, zc, r), d = _bar_pose("shin_barrier", shank_over)
     m = env.sim.model
-    d = mujoco.MjData(m)
-    d.qpos[:] = qpos[0].numpy()
-    mujoco.mj_forward(m, d)
     sites = env.robot.query_site_names
     names = [q.name for q in env.robot.query_links]
-    p = cfg.rewards.params
+    knee_k = names.index("left_knee")
+    p = env.cfg.rewards.params
     expect = 0.0
     for side in ("left", "right"):
         knee = d.site_xpos[m.site(sites[names.index(f"{side}_knee")]).id]

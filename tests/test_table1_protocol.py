@@ -116,7 +116,8 @@ def _variant(tmp_path, edit) -> str:
         (lambda r: (r["cells"]["ours_crouch_pass"].pop("env_steps"), r["cells"]["ours_crouch_pass"].update(minutes=60)),
          r"row 'Ours' \(cell ours_crouch_pass\) has a minutes budget"),
         (lambda r: r["tables"]["table1"]["methods"].update({"Ours": ["ours_crouch_pass"]}),
-         r"row 'Ours' \(one cell\) is not shaped like row 'ASTraversal' \(types \['crouch-pass', 'side-crouch', 's"),
+         r"row 'Ours' \(one cell\) is not shaped like row 'ASTraversal' "
+         r"\(types \['crouch-pass', 'side-crouch', 'side-pass'\]\)"),
         (lambda r: r["tables"]["table1"]["methods"].update(
             {"Ours": {"crouch-pass": ["ours_crouch_pass", "wo_r_field_crouch_pass"]}}),
          r"row 'Ours', column 'crouch-pass', must be one cell"),

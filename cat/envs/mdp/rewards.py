@@ -5,6 +5,7 @@ the constants in ``RewardCfg.params``: config, recorded in every run's config.ya
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import TYPE_CHECKING
 
@@ -214,20 +215,25 @@ SHIN_FRACTIONS = (0.25, 0.5, 0.75)
 """Where ``shin_barrier`` samples each shin: fractions of the way from the knee's query point to the foot's."""
 
 
+@functools.cache
+def _knee_links(names: tuple[str, ...]) -> list[int]:
+    """Indices of the left and right knee query links (resolved once per robot, not every step)."""
+    missing = [n for n in ("left_knee", "right_knee") if n not in names]
+    if missing:
+        raise ValueError(f"the shin_barrier reward needs query links {', '.join(missing)}; the robot has {list(names)}")
+    return [names.index("left_knee"), names.index("right_knee")]
+
+
 @reward_term()
 def shin_barrier(env: TraversalEnv, shin_margin: float, shin_radius: float, barrier_width: float) -> torch.Tensor:
     """``sdf_barrier`` along each shin: points between the knee and foot query points (``SHIN_FRACTIONS``), their
     SDF less ``shin_radius`` (the shank's half-thickness about that axis), with margin ``shin_margin``. The knee's
     query point is the joint, ~35 cm up: a shank that brushes a tall bar on the way over touches 10-25 cm below it,
     where no query point looks (hurdles: the graze that fails the tallest bars; docs/training.md)."""
-    names = [q.name for q in env.robot.query_links]
-    ends = [f"{side}_{part}" for part in ("knee", "foot") for side in ("left", "right")]
-    if not set(ends) <= set(names):
-        raise ValueError(f"the shin_barrier reward needs query links {', '.join(ends)}; the robot has {names}")
-    knees, feet = [names.index(n) for n in ends[:2]], [names.index(n) for n in ends[2:]]
-    pos = env.state.link_pos
-    frac = torch.tensor(SHIN_FRACTIONS, device=env.device, dtype=pos.dtype)[None, None, :, None]
-    knee, foot = pos[:, knees, None], pos[:, feet, None]  # (N, 2, 1, 3)
+    st = env.state
+    knees = _knee_links(tuple(q.name for q in env.robot.query_links))
+    frac = torch.tensor(SHIN_FRACTIONS, device=env.device, dtype=st.link_pos.dtype)[None, None, :, None]
+    knee, foot = st.link_pos[:, knees, None], st.foot_pos[:, :, None]  # (N, 2, 1, 3), feet left then right
     points = knee + frac * (foot - knee)  # (N, 2, S, 3)
     sdf = env.field_source.sample(points.flatten(1, 2), env.goals).sdf - shin_radius
     return F.softplus((shin_margin - sdf) / barrier_width).sum(dim=-1)

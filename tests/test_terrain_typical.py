@@ -14,7 +14,7 @@ from cat.terrain import (
     typical_variants,
     warmup_variants,
 )
-from cat.terrain.typical import GRADED_BY, graded_kinds
+from cat.terrain.typical import GRADED_BY, GRADED_NARROW_Y, graded_kinds
 from cat.terrain.voxel import free_volume_fraction
 
 
@@ -243,6 +243,30 @@ def test_graded_slit_offset_moves_a_narrow_slit_off_the_axis():
         )
     other = warmup_variants("side-pass", 3, 1, graded)  # another type's warm-ups: not graded by it
     assert [o.meta["layout"] for o in other] == [o.meta["layout"] for o in warmup_variants("side-pass", 3, 1)]
+
+
+def test_graded_slit_narrow_narrows_a_slit_ahead_of_the_easiest_bar_and_ceiling():
+    """``Graded(slit_narrow=True)``: side-hurdle-crouch's warm-ups hold a slit within 10 cm of the axis narrowing from
+    0.90-0.93 m at d = -1 to 0.45-0.48 m at d = -0.1, then the bar and the ceiling of the easiest paper variant
+    (8-10 cm, 1.13-1.15 m), built where the layout says; the paper's variants are untouched."""
+    graded = Graded(slit_narrow=True)
+    for seed in range(3):
+        gaps = []
+        for s in warmup_variants("side-hurdle-crouch", 10, seed, graded):
+            x, gap, yc = _slit_walls(s)
+            lay = s.meta["layout"]
+            assert abs(gap - lay["slit_gap"][0]) < 1e-3 and abs(yc - lay["slit_y"][0]) < 1e-3, (gap, yc, lay)
+            assert abs(yc) <= GRADED_NARROW_Y + 1e-6 and abs(x - lay["x"][0]) < 1e-3, (x, yc, lay)
+            (top,), (bottom,) = lay["bar_top"], lay["ceiling_bottom"]
+            assert 0.08 - 1e-6 <= top <= 0.1 and 1.13 <= bottom <= 1.15 + 1e-6, lay
+            parts = [p.bounds for p in s.mesh.split(only_watertight=False)]
+            assert any(abs(b[1, 2] - top) < 1e-3 for b in parts) and any(abs(b[0, 2] - bottom) < 1e-3 for b in parts)
+            gaps.append(gap)
+        assert 0.90 - 1e-6 <= gaps[0] <= 0.93 + 1e-6 and 0.45 - 1e-6 <= gaps[-1] <= 0.48 + 1e-6, gaps
+        assert all(b < a for a, b in zip(gaps[:-1], gaps[1:], strict=True)), gaps  # 5 cm a level, 3 cm of jitter
+    for d in (0.0, 0.7):  # the paper's variants: the same with and without it
+        a, b = make_typical("side-hurdle-crouch", d, 2, graded=graded), make_typical("side-hurdle-crouch", d, 2)
+        assert a.meta["layout"] == b.meta["layout"] and _slit_walls(a) == _slit_walls(b)
 
 
 @pytest.mark.parametrize("field", sorted(GRADED_BY))

@@ -109,8 +109,12 @@ def check_scene_task(task: EnvCfg) -> tuple[str | None, list[str]]:
 
 def graded(task: EnvCfg) -> Graded:
     """How ``task``'s warm-ups grade their types (``cat.terrain.typical.Graded``): ``task.warmup_bar_pitch`` with
-    ``task.warmup_bars``, ``task.warmup_slit_offset``."""
-    return Graded(bars=task.warmup_bars if task.warmup_bar_pitch else 0, slit_offset=task.warmup_slit_offset)
+    ``task.warmup_bars``, ``task.warmup_slit_offset``, ``task.warmup_slit_narrow``."""
+    return Graded(
+        bars=task.warmup_bars if task.warmup_bar_pitch else 0,
+        slit_offset=task.warmup_slit_offset,
+        slit_narrow=task.warmup_slit_narrow,
+    )
 
 
 def scene_source(task: EnvCfg) -> SceneSource | None:

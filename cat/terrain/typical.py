@@ -30,7 +30,8 @@ docs/results.md. A 5 cm strip fits between a walking gait's footprints by chance
 placed for it, so the width gives the curriculum its first successes.) They are training-only warm-up scenes
 (``warmup_variants``) that let a difficulty curriculum start where a walking policy already succeeds; the paper's
 variants and every evaluation use d ∈ [0, 1]. ``Graded`` swaps a type's warm-up ramp for a ladder of the skill its
-hard variants need (multi-hurdle: the bar pitch, a third bar; side-hurdle: the slit's offset at a narrow gap).
+hard variants need (multi-hurdle: the bar pitch, a third bar; side-hurdle: the slit's offset at a narrow gap;
+side-hurdle-crouch: the slit's width).
 """
 
 from __future__ import annotations
@@ -92,17 +93,26 @@ GRADED_BARS = (0, 2, 3)  # bars of a graded warm-up (0: not graded, random gaps)
 # hard variants fail"); here the offset is the only thing that grows.
 GRADED_SLIT_GAP = 0.45  # [m]
 GRADED_SLIT_OFFSET = (0.0, 0.40)  # [m], d = -1 -> 0
+# Graded slit width (side-hurdle-crouch warm-ups, ``Graded.slit_narrow``): a slit near the axis (centre within
+# ``GRADED_NARROW_Y``) narrowing from the paper's widest gap to its narrow ones as d grows (+ up to 3 cm), ahead of
+# the bar and the ceiling of the type's easiest paper variant (d = 0). The hurdle-crouch lineage passes the paper's
+# slits down to ~0.57 m and none from 0.50 m (docs/results.md, "Side-hurdle-crouch and side-hurdle: could one start
+# the other?"); here the slit's width is the only thing that grows. (Not the 4.5 cm warm-up bar: that lineage trips
+# on it, 3.5 % of trials passing even the widest slit.)
+GRADED_NARROW_GAP = (0.90, 0.40)  # [m], d = -1 -> 0
+GRADED_NARROW_Y = 0.10  # [m]
 
 
 @dataclass(frozen=True)
 class Graded:
     """How training-only warm-ups (d < 0) grade a type's hard part, instead of the default ramp: multi-hurdle's
     bars at a pitch shrinking with d (``bars``: 2, or 3 where they fit; 0: random gaps), side-hurdle's slit moving
-    off the axis at a narrow gap (``slit_offset``). Each applies to its own type only; the paper's variants never
-    change."""
+    off the axis at a narrow gap (``slit_offset``), side-hurdle-crouch's slit narrowing ahead of its easiest bar
+    and ceiling (``slit_narrow``). Each applies to its own type only; the paper's variants never change."""
 
     bars: int = 0
     slit_offset: bool = False
+    slit_narrow: bool = False
 
     def __post_init__(self):
         if self.bars not in GRADED_BARS:
@@ -115,6 +125,7 @@ NOT_GRADED = Graded()
 GRADED_BY = {
     "bars": ("multi-hurdle", "task.warmup_bar_pitch"),
     "slit_offset": ("side-hurdle", "task.warmup_slit_offset"),
+    "slit_narrow": ("side-hurdle-crouch", "task.warmup_slit_narrow"),
 }
 
 
@@ -375,6 +386,21 @@ def _offset_slit(p: _Params) -> Element:
     return WALL_T, lambda x0: _slit_parts(x0, gap, yc)
 
 
+def _narrow_slit(p: _Params) -> Element:
+    """A warm-up slit near the axis narrowing with d (``GRADED_NARROW_GAP``, ``GRADED_NARROW_Y``)."""
+    gap = p.note("slit_gap", lerp(*GRADED_NARROW_GAP, p.d - WARMUP[0]) + p.rng.uniform(0.0, 0.03))
+    yc = p.note("slit_y", p.rng.uniform(-GRADED_NARROW_Y, GRADED_NARROW_Y))
+    return WALL_T, lambda x0: _slit_parts(x0, gap, yc)
+
+
+def _easiest_bar_and_ceiling(p: _Params) -> list[Element]:
+    """Side-hurdle-crouch's bar and ceiling as its easiest paper variant draws them (d = 0 and its jitter), whatever
+    ``p.d``; recorded in ``p``'s layout."""
+    q = _Params(0.0, p.rng)
+    q.layout = p.layout
+    return [_bar(q), _ceiling(q, (0.25, 0.4))]
+
+
 def _corridor(p: _Params) -> list[trimesh.Trimesh]:
     half = p.note("corridor_width", p(1.3, 0.75, jitter=0.05, trivial=1.8)) / 2
     x0, x1 = COURSE[0] - 0.05, COURSE[1] - 0.05
@@ -387,6 +413,8 @@ def _layout(kind: str, p: _Params) -> list[trimesh.Trimesh]:
     if kind == "hurdle-crouch":
         return _sequence([_bar(p), _ceiling(p)], p)
     if kind == "side-hurdle-crouch":
+        if p.graded.slit_narrow and p.d < 0:
+            return _sequence([_narrow_slit(p), *_easiest_bar_and_ceiling(p)], p)
         return _sequence([_slit(p), _bar(p), _ceiling(p, (0.25, 0.4))], p)
     if kind == "side-hurdle":
         if p.graded.slit_offset and p.d < 0:

@@ -393,12 +393,17 @@ def _narrow_slit(p: _Params) -> Element:
     return WALL_T, lambda x0: _slit_parts(x0, gap, yc)
 
 
+def _bar_and_ceiling(p: _Params) -> list[Element]:
+    """Side-hurdle-crouch's bar and ceiling, after its slit."""
+    return [_bar(p), _ceiling(p, (0.25, 0.4))]
+
+
 def _easiest_bar_and_ceiling(p: _Params) -> list[Element]:
-    """Side-hurdle-crouch's bar and ceiling as its easiest paper variant draws them (d = 0 and its jitter), whatever
-    ``p.d``; recorded in ``p``'s layout."""
+    """``_bar_and_ceiling`` as the easiest paper variant draws them (d = 0 and its jitter), whatever ``p.d``;
+    recorded in ``p``'s layout."""
     q = _Params(0.0, p.rng)
     q.layout = p.layout
-    return [_bar(q), _ceiling(q, (0.25, 0.4))]
+    return _bar_and_ceiling(q)
 
 
 def _corridor(p: _Params) -> list[trimesh.Trimesh]:
@@ -415,7 +420,7 @@ def _layout(kind: str, p: _Params) -> list[trimesh.Trimesh]:
     if kind == "side-hurdle-crouch":
         if p.graded.slit_narrow and p.d < 0:
             return _sequence([_narrow_slit(p), *_easiest_bar_and_ceiling(p)], p)
-        return _sequence([_slit(p), _bar(p), _ceiling(p, (0.25, 0.4))], p)
+        return _sequence([_slit(p), *_bar_and_ceiling(p)], p)
     if kind == "side-hurdle":
         if p.graded.slit_offset and p.d < 0:
             return _sequence([_offset_slit(p), _bar(p, WARMUP)], p)

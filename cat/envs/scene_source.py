@@ -100,10 +100,11 @@ def check_scene_task(task: EnvCfg) -> tuple[str | None, list[str]]:
         raise ValueError(f"task.warmup_bars={task.warmup_bars}: a graded warm-up holds 2 bars, or 3 where they fit")
     if task.warmup_bars != 2 and not task.warmup_bar_pitch:
         raise ValueError("task.warmup_bars counts the bars of the graded warm-ups: it needs task.warmup_bar_pitch=true")
-    for key, kind in graded_kinds(graded(task)).items():
-        if kind not in [scene_kind, *groups] or not task.warmup_variants:
-            raise ValueError(f"{key} grades {kind}'s warm-ups: needs task.scene_kind (or scene_groups) with "
-                             f"{kind} and task.warmup_variants > 0")  # fmt: skip
+    for key, kinds in graded_kinds(graded(task)).items():
+        if not set(kinds) & {scene_kind, *groups} or not task.warmup_variants:
+            either = " or ".join(kinds)
+            raise ValueError(f"{key} grades {either}'s warm-ups: needs task.scene_kind (or scene_groups) with "
+                             f"{either} and task.warmup_variants > 0")  # fmt: skip
     return scene_kind, groups
 
 
@@ -177,9 +178,9 @@ def eval_scene_source(
         if warmup:
             if task.warmup_variants < 1:
                 raise ValueError(f"warmup=true: the run's task {task.scene_kind!r} has no warm-up scenes")
-            for key, kind in graded_kinds(graded(task)).items():
-                if kind_name(task.scene_kind) != kind:
-                    raise ValueError(f"{key} grades {kind}'s warm-ups, not {task.scene_kind!r}'s")
+            for key, kinds in graded_kinds(graded(task)).items():
+                if kind_name(task.scene_kind) not in kinds:
+                    raise ValueError(f"{key} grades {' or '.join(kinds)}'s warm-ups, not {task.scene_kind!r}'s")
             return SceneSource(
                 (task.scene_kind,),
                 variants=0,

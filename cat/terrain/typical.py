@@ -93,12 +93,13 @@ GRADED_BARS = (0, 2, 3)  # bars of a graded warm-up (0: not graded, random gaps)
 # hard variants fail"); here the offset is the only thing that grows.
 GRADED_SLIT_GAP = 0.45  # [m]
 GRADED_SLIT_OFFSET = (0.0, 0.40)  # [m], d = -1 -> 0
-# Graded slit width (side-hurdle-crouch warm-ups, ``Graded.slit_narrow``): a slit near the axis (centre within
-# ``GRADED_NARROW_Y``) narrowing from the paper's widest gap to its narrow ones as d grows (+ up to 3 cm), ahead of
-# the bar and the ceiling of the type's easiest paper variant (d = 0). The hurdle-crouch lineage passes the paper's
-# slits down to ~0.57 m and none from 0.50 m (docs/results.md, "Side-hurdle-crouch and side-hurdle: could one start
-# the other?"); here the slit's width is the only thing that grows. (Not the 4.5 cm warm-up bar: that lineage trips
-# on it, 3.5 % of trials passing even the widest slit.)
+# Graded slit width (side-hurdle-crouch and side-hurdle warm-ups, ``Graded.slit_narrow``): a slit near the axis
+# (centre within ``GRADED_NARROW_Y``) narrowing from the paper's widest gap to its narrow ones as d grows (+ up to
+# 3 cm), ahead of what follows the slit in the type's easiest paper variant (d = 0): side-hurdle-crouch's bar and
+# ceiling, side-hurdle's bar. The hurdle-crouch lineage passes the paper's slits down to ~0.57 m and none from
+# 0.50 m (docs/results.md, "Side-hurdle-crouch and side-hurdle: could one start the other?"); here the slit's width
+# is the only thing that grows. (Not the 4.5 cm warm-up bar: that lineage trips on it, 3.5 % of trials passing
+# even the widest slit.)
 GRADED_NARROW_GAP = (0.90, 0.40)  # [m], d = -1 -> 0
 GRADED_NARROW_Y = 0.10  # [m]
 
@@ -107,8 +108,9 @@ GRADED_NARROW_Y = 0.10  # [m]
 class Graded:
     """How training-only warm-ups (d < 0) grade a type's hard part, instead of the default ramp: multi-hurdle's
     bars at a pitch shrinking with d (``bars``: 2, or 3 where they fit; 0: random gaps), side-hurdle's slit moving
-    off the axis at a narrow gap (``slit_offset``), side-hurdle-crouch's slit narrowing ahead of its easiest bar
-    and ceiling (``slit_narrow``). Each applies to its own type only; the paper's variants never change."""
+    off the axis at a narrow gap (``slit_offset``), the slit of side-hurdle-crouch and side-hurdle narrowing ahead
+    of the rest of the type's easiest paper variant (``slit_narrow``). Each applies to the types ``GRADED_BY``
+    names only; the paper's variants never change."""
 
     bars: int = 0
     slit_offset: bool = False
@@ -117,21 +119,26 @@ class Graded:
     def __post_init__(self):
         if self.bars not in GRADED_BARS:
             raise SceneError(f"graded bars must be one of {GRADED_BARS} (0: random gaps), got {self.bars}")
+        if self.slit_offset and self.slit_narrow:  # both would build side-hurdle's one warm-up slit
+            raise SceneError(
+                f"{GRADED_BY['slit_offset'][1]} and {GRADED_BY['slit_narrow'][1]} both grade side-hurdle's warm-up "
+                "slit: set one"
+            )
 
 
 NOT_GRADED = Graded()
-# The one typical type each ``Graded`` field grades, and the task key that turns it on: what both the training set's
-# and the warm-up diagnostic's checks read (cat.envs.scene_source), so a third grading is one more row here.
+# The typical types each ``Graded`` field grades, and the task key that turns it on: what both the training set's
+# and the warm-up diagnostic's checks read (cat.envs.scene_source), so another grading is one more row here.
 GRADED_BY = {
-    "bars": ("multi-hurdle", "task.warmup_bar_pitch"),
-    "slit_offset": ("side-hurdle", "task.warmup_slit_offset"),
-    "slit_narrow": ("side-hurdle-crouch", "task.warmup_slit_narrow"),
+    "bars": (("multi-hurdle",), "task.warmup_bar_pitch"),
+    "slit_offset": (("side-hurdle",), "task.warmup_slit_offset"),
+    "slit_narrow": (("side-hurdle-crouch", "side-hurdle"), "task.warmup_slit_narrow"),
 }
 
 
-def graded_kinds(graded: Graded) -> dict[str, str]:
-    """The gradings ``graded`` turns on: its task key -> the typical type whose warm-ups it changes."""
-    return {key: kind for field, (kind, key) in GRADED_BY.items() if getattr(graded, field)}
+def graded_kinds(graded: Graded) -> dict[str, tuple[str, ...]]:
+    """The gradings ``graded`` turns on: its task key -> the typical types whose warm-ups it changes."""
+    return {key: kinds for field, (kinds, key) in GRADED_BY.items() if getattr(graded, field)}
 
 
 def lerp(a: float, b: float, t: float) -> float:
@@ -398,12 +405,17 @@ def _bar_and_ceiling(p: _Params) -> list[Element]:
     return [_bar(p), _ceiling(p, (0.25, 0.4))]
 
 
-def _easiest_bar_and_ceiling(p: _Params) -> list[Element]:
-    """``_bar_and_ceiling`` as the easiest paper variant draws them (d = 0 and its jitter), whatever ``p.d``;
+def _warmup_bar(p: _Params) -> list[Element]:
+    """Side-hurdle's bar, after its slit: grown over the whole warm-up range (no ceiling follows)."""
+    return [_bar(p, WARMUP)]
+
+
+def _easiest(p: _Params, build: Callable[[_Params], list[Element]]) -> list[Element]:
+    """``build``'s elements as the easiest paper variant draws them (d = 0 and its jitter), whatever ``p.d``;
     recorded in ``p``'s layout."""
     q = _Params(0.0, p.rng)
     q.layout = p.layout
-    return _bar_and_ceiling(q)
+    return build(q)
 
 
 def _corridor(p: _Params) -> list[trimesh.Trimesh]:
@@ -419,12 +431,14 @@ def _layout(kind: str, p: _Params) -> list[trimesh.Trimesh]:
         return _sequence([_bar(p), _ceiling(p)], p)
     if kind == "side-hurdle-crouch":
         if p.graded.slit_narrow and p.d < 0:
-            return _sequence([_narrow_slit(p), *_easiest_bar_and_ceiling(p)], p)
+            return _sequence([_narrow_slit(p), *_easiest(p, _bar_and_ceiling)], p)
         return _sequence([_slit(p), *_bar_and_ceiling(p)], p)
     if kind == "side-hurdle":
         if p.graded.slit_offset and p.d < 0:
-            return _sequence([_offset_slit(p), _bar(p, WARMUP)], p)
-        return _sequence([_slit(p), _bar(p, WARMUP)], p)
+            return _sequence([_offset_slit(p), *_warmup_bar(p)], p)
+        if p.graded.slit_narrow and p.d < 0:
+            return _sequence([_narrow_slit(p), *_easiest(p, _warmup_bar)], p)
+        return _sequence([_slit(p), *_warmup_bar(p)], p)
     if kind == "side-crouch":
         return _sequence([_low_door(p)], p)
     if kind == "hurdle-pass":

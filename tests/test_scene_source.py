@@ -120,7 +120,10 @@ def test_a_folder_of_links_plays_as_it_trains(tmp_path):
         (dict(scene_kind="multi-hurdle", warmup_variants=2, warmup_bars=3), "needs task.warmup_bar_pitch=true"),
         (dict(scene_kind="side-pass", warmup_variants=2, warmup_slit_offset=True), "grades side-hurdle's warm-ups"),
         (dict(scene_kind="side-hurdle", warmup_slit_offset=True), "task.warmup_variants > 0"),
-        (dict(scene_kind="side-pass", warmup_variants=2, warmup_slit_narrow=True), "side-hurdle-crouch or side-hurdle"),
+        (
+            dict(scene_kind="crouch-pass", warmup_variants=2, warmup_slit_narrow=True),
+            "grades side-hurdle-crouch, side-hurdle or side-pass's warm-ups",
+        ),
         (
             dict(scene_kind="side-hurdle", warmup_variants=2, warmup_slit_narrow=True, warmup_slit_offset=True),
             "task.warmup_slit_offset and task.warmup_slit_narrow both grade side-hurdle's warm-up slit",

@@ -14,7 +14,7 @@ from cat.terrain import (
     typical_variants,
     warmup_variants,
 )
-from cat.terrain.typical import GRADED_BY, GRADED_NARROW_Y, graded_kinds
+from cat.terrain.typical import GRADED_BY, GRADED_NARROW_Y, WALL_T, graded_kinds
 from cat.terrain.voxel import free_volume_fraction
 
 
@@ -209,13 +209,13 @@ def test_three_graded_bars_where_they_fit():
         Graded(bars=4)
 
 
-def _slit_walls(scene) -> tuple[float, float, float]:
-    """(near edge x, gap, centre y) of the first full-height slit wall pair of a scene."""
+def _slit_walls(scene, k: int = 0) -> tuple[float, float, float]:
+    """(near edge x, gap, centre y) of the ``k``-th full-height slit wall pair of a scene, along the course."""
     walls = sorted(
         (p.bounds for p in scene.mesh.split(only_watertight=False) if p.bounds[0, 2] < 0.01 and p.bounds[1, 2] > 1.4),
         key=lambda b: (round(float(b[0, 0]), 3), float(b[0, 1])),
     )
-    lo, hi = walls[0], walls[1]
+    lo, hi = walls[2 * k], walls[2 * k + 1]
     return float(lo[0, 0]), float(hi[0, 1] - lo[1, 1]), float(hi[0, 1] + lo[1, 1]) / 2
 
 
@@ -273,6 +273,27 @@ def test_graded_slit_narrow_narrows_a_slit_ahead_of_the_easiest_paper_variant(ki
     for d in (0.0, 0.7):  # the paper's variants: the same with and without it
         a, b = make_typical(kind, d, 2, graded=graded), make_typical(kind, d, 2)
         assert a.meta["layout"] == b.meta["layout"] and _slit_walls(a) == _slit_walls(b)
+
+
+def test_graded_slit_narrow_narrows_both_side_pass_slits_near_the_axis():
+    """``Graded(slit_narrow=True)`` on side-pass: both warm-up slits lie within 10 cm of the axis (not offset to
+    opposite sides), at least 0.45 m apart, each narrowing from 0.90-0.93 m at d = -1 to 0.45-0.48 m at d = -0.1,
+    built where the layout says; the paper's variants are untouched."""
+    graded = Graded(slit_narrow=True)
+    for seed in range(3):
+        gaps = []
+        for s in warmup_variants("side-pass", 10, seed, graded):
+            lay = s.meta["layout"]
+            (x0, g0, y0), (x1, g1, y1) = _slit_walls(s, 0), _slit_walls(s, 1)
+            assert np.allclose([g0, g1], lay["slit_gap"], atol=1e-3) and np.allclose([y0, y1], lay["slit_y"], atol=1e-3)
+            assert np.allclose([x0, x1], lay["x"], atol=1e-3) and x1 - x0 - WALL_T >= 0.45 - 1e-6, lay
+            assert max(abs(y0), abs(y1)) <= GRADED_NARROW_Y + 1e-6 and abs(g0 - g1) <= 0.03 + 1e-6, lay
+            gaps.append(g0)
+        assert 0.90 - 1e-6 <= gaps[0] <= 0.93 + 1e-6 and 0.45 - 1e-6 <= gaps[-1] <= 0.48 + 1e-6, gaps
+        assert all(b < a for a, b in zip(gaps[:-1], gaps[1:], strict=True)), gaps
+    for d in (0.0, 0.7):
+        a, b = make_typical("side-pass", d, 2, graded=graded), make_typical("side-pass", d, 2)
+        assert a.meta["layout"] == b.meta["layout"] and _slit_walls(a, 1) == _slit_walls(b, 1)
 
 
 def test_one_warmup_slit_takes_one_grading():

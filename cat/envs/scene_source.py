@@ -102,10 +102,15 @@ def check_scene_task(task: EnvCfg) -> tuple[str | None, list[str]]:
         raise ValueError("task.warmup_bars counts the bars of the graded warm-ups: it needs task.warmup_bar_pitch=true")
     for key, kinds in graded_kinds(graded(task)).items():
         if not set(kinds) & {scene_kind, *groups} or not task.warmup_variants:
-            either = " or ".join(kinds)
+            either = _either(kinds)
             raise ValueError(f"{key} grades {either}'s warm-ups: needs task.scene_kind (or scene_groups) with "
                              f"{either} and task.warmup_variants > 0")  # fmt: skip
     return scene_kind, groups
+
+
+def _either(kinds: tuple[str, ...]) -> str:
+    """``("a", "b", "c")`` as ``a, b or c``."""
+    return " or ".join([", ".join(kinds[:-1]), kinds[-1]] if len(kinds) > 1 else list(kinds))
 
 
 def graded(task: EnvCfg) -> Graded:
@@ -180,7 +185,7 @@ def eval_scene_source(
                 raise ValueError(f"warmup=true: the run's task {task.scene_kind!r} has no warm-up scenes")
             for key, kinds in graded_kinds(graded(task)).items():
                 if kind_name(task.scene_kind) not in kinds:
-                    raise ValueError(f"{key} grades {' or '.join(kinds)}'s warm-ups, not {task.scene_kind!r}'s")
+                    raise ValueError(f"{key} grades {_either(kinds)}'s warm-ups, not {task.scene_kind!r}'s")
             return SceneSource(
                 (task.scene_kind,),
                 variants=0,

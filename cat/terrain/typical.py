@@ -93,10 +93,11 @@ GRADED_BARS = (0, 2, 3)  # bars of a graded warm-up (0: not graded, random gaps)
 # hard variants fail"); here the offset is the only thing that grows.
 GRADED_SLIT_GAP = 0.45  # [m]
 GRADED_SLIT_OFFSET = (0.0, 0.40)  # [m], d = -1 -> 0
-# Graded slit width (side-hurdle-crouch and side-hurdle warm-ups, ``Graded.slit_narrow``): a slit near the axis
-# (centre within ``GRADED_NARROW_Y``) narrowing from the paper's widest gap to its narrow ones as d grows (+ up to
-# 3 cm), ahead of what follows the slit in the type's easiest paper variant (d = 0): side-hurdle-crouch's bar and
-# ceiling, side-hurdle's bar. The hurdle-crouch lineage passes the paper's slits down to ~0.57 m and none from
+# Graded slit width (side-hurdle-crouch, side-hurdle and side-pass warm-ups, ``Graded.slit_narrow``): a slit near the
+# axis (centre within ``GRADED_NARROW_Y``) narrowing from the paper's widest gap to its narrow ones as d grows (+ up
+# to 3 cm), ahead of what follows the slit in the type's easiest paper variant (d = 0): side-hurdle-crouch's bar and
+# ceiling, side-hurdle's bar; side-pass's two slits are both such slits (near the axis, not offset to opposite
+# sides: the paper's side-pass policy passes its widest pairs and none of its two narrowest, 0.39 / 0.32 m). The hurdle-crouch lineage passes the paper's slits down to ~0.57 m and none from
 # 0.50 m (docs/results.md, "Side-hurdle-crouch and side-hurdle: could one start the other?"); here the slit's width
 # is the only thing that grows. (Not the 4.5 cm warm-up bar: that lineage trips on it, 3.5 % of trials passing
 # even the widest slit.)
@@ -109,7 +110,7 @@ class Graded:
     """How training-only warm-ups (d < 0) grade a type's hard part, instead of the default ramp: multi-hurdle's
     bars at a pitch shrinking with d (``bars``: 2, or 3 where they fit; 0: random gaps), side-hurdle's slit moving
     off the axis at a narrow gap (``slit_offset``), the slit of side-hurdle-crouch and side-hurdle narrowing ahead
-    of the rest of the type's easiest paper variant (``slit_narrow``). Each applies to the types ``GRADED_BY``
+    of the rest of the type's easiest paper variant, side-pass's two slits narrowing near the axis (``slit_narrow``). Each applies to the types ``GRADED_BY``
     names only; the paper's variants never change."""
 
     bars: int = 0
@@ -132,7 +133,7 @@ NOT_GRADED = Graded()
 GRADED_BY = {
     "bars": (("multi-hurdle",), "task.warmup_bar_pitch"),
     "slit_offset": (("side-hurdle",), "task.warmup_slit_offset"),
-    "slit_narrow": (("side-hurdle-crouch", "side-hurdle"), "task.warmup_slit_narrow"),
+    "slit_narrow": (("side-hurdle-crouch", "side-hurdle", "side-pass"), "task.warmup_slit_narrow"),
 }
 
 
@@ -446,6 +447,8 @@ def _layout(kind: str, p: _Params) -> list[trimesh.Trimesh]:
     if kind == "crouch-pass":
         return _corridor(p) + _sequence([_ceiling(p, (0.4, 0.9))], p)
     if kind == "side-pass":
+        if p.graded.slit_narrow and p.d < 0:
+            return _sequence([_narrow_slit(p), _narrow_slit(p)], p, min_gap=0.45)
         off = p(0.2, 0.45) * p.rng.choice([-1.0, 1.0])
         return _sequence([_slit(p, yc=off), _slit(p, yc=-off)], p, min_gap=0.45)
     if kind == "multi-hurdle":

@@ -31,7 +31,7 @@ placed for it, so the width gives the curriculum its first successes.) They are 
 (``warmup_variants``) that let a difficulty curriculum start where a walking policy already succeeds; the paper's
 variants and every evaluation use d ∈ [0, 1]. ``Graded`` swaps a type's warm-up ramp for a ladder of the skill its
 hard variants need (multi-hurdle: the bar pitch, a third bar; side-hurdle: the slit's offset at a narrow gap;
-side-hurdle-crouch: the slit's width).
+side-hurdle-crouch, side-hurdle and side-pass: the slit's width).
 """
 
 from __future__ import annotations
@@ -97,10 +97,10 @@ GRADED_SLIT_OFFSET = (0.0, 0.40)  # [m], d = -1 -> 0
 # axis (centre within ``GRADED_NARROW_Y``) narrowing from the paper's widest gap to its narrow ones as d grows (+ up
 # to 3 cm), ahead of what follows the slit in the type's easiest paper variant (d = 0): side-hurdle-crouch's bar and
 # ceiling, side-hurdle's bar; side-pass's two slits are both such slits (near the axis, not offset to opposite
-# sides: the paper's side-pass policy passes its widest pairs and none of its two narrowest, 0.39 / 0.32 m). The hurdle-crouch lineage passes the paper's slits down to ~0.57 m and none from
-# 0.50 m (docs/results.md, "Side-hurdle-crouch and side-hurdle: could one start the other?"); here the slit's width
-# is the only thing that grows. (Not the 4.5 cm warm-up bar: that lineage trips on it, 3.5 % of trials passing
-# even the widest slit.)
+# sides). The hurdle-crouch lineage passes the paper's slits down to ~0.57 m and none from 0.50 m (docs/results.md,
+# "Side-hurdle-crouch and side-hurdle: could one start the other?"), the side-pass specialist none of its two
+# narrowest pairs (0.39 / 0.32 m); here the slit's width is the only thing that grows. (Not the 4.5 cm warm-up bar:
+# the hurdle-crouch lineage trips on it, 3.5 % of trials passing even the widest slit.)
 GRADED_NARROW_GAP = (0.90, 0.40)  # [m], d = -1 -> 0
 GRADED_NARROW_Y = 0.10  # [m]
 
@@ -110,8 +110,8 @@ class Graded:
     """How training-only warm-ups (d < 0) grade a type's hard part, instead of the default ramp: multi-hurdle's
     bars at a pitch shrinking with d (``bars``: 2, or 3 where they fit; 0: random gaps), side-hurdle's slit moving
     off the axis at a narrow gap (``slit_offset``), the slit of side-hurdle-crouch and side-hurdle narrowing ahead
-    of the rest of the type's easiest paper variant, side-pass's two slits narrowing near the axis (``slit_narrow``). Each applies to the types ``GRADED_BY``
-    names only; the paper's variants never change."""
+    of the rest of the type's easiest paper variant and side-pass's two slits narrowing near the axis
+    (``slit_narrow``). Each applies to the types ``GRADED_BY`` names only; the paper's variants never change."""
 
     bars: int = 0
     slit_offset: bool = False

@@ -340,7 +340,7 @@ def test_layout_records_what_the_mesh_holds(seed):
 
 def test_layout_text_prints_a_recorded_layout_and_survives_a_hand_written_one():
     """One token per scene for ``play.py by_scene=true``; a scene file's odd ``layout`` prints, it does not raise."""
-    from cat.terrain.typical import layout_text
+    from cat.terrain.scene import layout_text
 
     s = make_typical("side-hurdle", 0.7, 0)
     lay = s.meta["layout"]

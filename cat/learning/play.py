@@ -23,8 +23,7 @@ from cat.eval.runner import EvalCfg, make_eval_env, run_scene_group, run_trials
 from cat.eval.trials import Trial, first_trials, flat_trials, scene_trials
 from cat.learning.runs import load_run_config, resolve_checkpoint
 from cat.run.policy import MirrorAveraged, load_policy
-from cat.terrain.scene import Scene
-from cat.terrain.typical import layout_text
+from cat.terrain.scene import Scene, layout_text
 
 log = logging.getLogger(__name__)
 

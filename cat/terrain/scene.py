@@ -288,6 +288,19 @@ def _negated(values: object) -> object:
     return -values if isinstance(values, int | float) and not isinstance(values, bool) else values
 
 
+def layout_text(layout: object) -> str:
+    """``meta["layout"]`` as one token, ``slit_gap:0.49,slit_y:-0.30,x:0.67/1.15`` (centimetre precision); a layout
+    written by hand in a scene file prints as it is rather than failing."""
+    if not isinstance(layout, dict):
+        return str(layout).replace(" ", "")
+    vals = {k: v if isinstance(v, list | tuple) else [v] for k, v in layout.items()}
+    num = (int, float, np.floating, np.integer)
+    return ",".join(
+        f"{k}:{'/'.join(f'{x:.2f}' if isinstance(x, num) and not isinstance(x, bool) else str(x) for x in vs)}"
+        for k, vs in vals.items()
+    ).replace(" ", "")
+
+
 def _point3(p, name: str) -> np.ndarray:
     p = np.asarray(p, dtype=np.float64).reshape(-1)
     if p.shape == (2,):

@@ -149,21 +149,9 @@ def lerp(a: float, b: float, t: float) -> float:
 # What a typical scene records of its layout (``Scene.meta["layout"]``: name -> values in placement order, metres):
 # sizes drawn from d (bar tops, ceiling undersides, slit gaps, corridor widths), a slit's centre across the course
 # (``slit_y``: lateral, so it changes sign in a mirrored scene) and each placed element's near edge along it (``x``).
-# ``play.py by_scene=true`` prints it beside each scene's results: where a policy fails, and on which layouts.
+# ``play.py by_scene=true`` prints it (``cat.terrain.scene.layout_text``) beside each scene's results: where a policy
+# fails, and on which layouts.
 LAYOUT_KEYS = ("bar_top", "ceiling_bottom", "slit_gap", "slit_y", "corridor_width", "x")
-
-
-def layout_text(layout: object) -> str:
-    """``meta["layout"]`` as one token, ``slit_gap:0.49,slit_y:-0.30,x:0.67/1.15`` (centimetre precision); a layout
-    written by hand in a scene file prints as it is rather than failing."""
-    if not isinstance(layout, dict):
-        return str(layout).replace(" ", "")
-    vals = {k: v if isinstance(v, list | tuple) else [v] for k, v in layout.items()}
-    num = (int, float, np.floating, np.integer)
-    return ",".join(
-        f"{k}:{'/'.join(f'{x:.2f}' if isinstance(x, num) and not isinstance(x, bool) else str(x) for x in vs)}"
-        for k, vs in vals.items()
-    ).replace(" ", "")
 
 
 SHAPES = ("paper", "unseen")  # the paper's building blocks (training, Table I) | shapes no training scene has

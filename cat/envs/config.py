@@ -280,9 +280,9 @@ class EnvCfg:
     # grows (0 -> 0.4 m, either side), so the curriculum grades lining up with an offset slit, which the paper's
     # variants only ask at their narrowest gaps (cat.terrain.typical.GRADED_SLIT_OFFSET; docs/results.md).
     warmup_slit_offset: bool = False
-    # training aid: side-hurdle-crouch's warm-ups hold a slit near the axis narrowing as d grows (0.90 -> 0.40 m)
-    # ahead of the type's easiest paper bar and ceiling, so the curriculum grades the side-on turn the hurdle-crouch
-    # lineage never learnt (cat.terrain.typical.GRADED_NARROW_GAP; docs/training.md).
+    # training aid: side-hurdle-crouch's and side-hurdle's warm-ups hold a slit near the axis narrowing as d grows
+    # (0.90 -> 0.40 m) ahead of the type's easiest paper bar (and ceiling), side-pass's two such slits, so the
+    # curriculum grades the side-on turn through a narrow slit (cat.terrain.typical.GRADED_NARROW_GAP; training.md).
     warmup_slit_narrow: bool = False
     # training aid: add the left/right mirror image of every scene (cat.terrain.Scene.mirrored), so a scene set
     # that is not balanced (eight of the paper's ten side-pass variants open to the left first) cannot teach one

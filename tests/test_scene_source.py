@@ -128,6 +128,10 @@ def test_a_folder_of_links_plays_as_it_trains(tmp_path):
             dict(scene_kind="side-hurdle", warmup_variants=2, warmup_slit_narrow=True, warmup_slit_offset=True),
             "task.warmup_slit_offset and task.warmup_slit_narrow both grade side-hurdle's warm-up slit",
         ),
+        (
+            dict(scene_kind="side-crouch", warmup_variants=2, warmup_slit_tight=True),
+            "task.warmup_slit_tight grades side-hurdle-crouch, side-hurdle or side-pass's warm-ups",
+        ),
         (dict(scene_kind="multi-hurdle", warmup_variants=2, warmup_bar_pitch=True, warmup_bars=4), "holds 2 bars"),
     ],
 )

@@ -14,7 +14,8 @@ from cat.terrain import (
     typical_variants,
     warmup_variants,
 )
-from cat.terrain.typical import GRADED_BY, GRADED_NARROW_Y, WALL_T, graded_kinds
+from cat.terrain.graded import GRADED_BY, GRADED_NARROW_Y, graded_kinds
+from cat.terrain.typical import WALL_T
 from cat.terrain.voxel import free_volume_fraction
 
 
@@ -296,10 +297,49 @@ def test_graded_slit_narrow_narrows_both_side_pass_slits_near_the_axis():
         assert a.meta["layout"] == b.meta["layout"] and _slit_walls(a, 1) == _slit_walls(b, 1)
 
 
+@pytest.mark.parametrize("kind", ["side-hurdle-crouch", "side-hurdle", "side-pass"])
+def test_graded_slit_tight_narrows_slits_as_they_leave_the_axis(kind):
+    """``Graded(slit_tight=True)``: each warm-up slit narrows (0.55-0.58 m at d = -1 to 0.34-0.38 m at d = -0.1)
+    while its centre leaves the axis (0-3 cm to 0.36-0.39 m), to both sides over the seeds (side-pass: its two slits
+    to opposite sides, at least 0.45 m apart), built where the layout says, ahead of the easiest paper variant's bar
+    (side-hurdle types); the paper's variants are untouched."""
+    graded = Graded(slit_tight=True)
+    walls = 2 if kind == "side-pass" else 1
+    sides = set()
+    for seed in range(3):
+        gaps, offsets = [], []
+        for s in warmup_variants(kind, 10, seed, graded):
+            lay = s.meta["layout"]
+            slits = [_slit_walls(s, i) for i in range(walls)]
+            assert np.allclose([g for _, g, _ in slits], lay["slit_gap"], atol=1e-3), (slits, lay)
+            assert np.allclose([y for _, _, y in slits], lay["slit_y"], atol=1e-3), (slits, lay)
+            assert np.allclose([x for x, _, _ in slits], lay["x"][:walls], atol=1e-3), (slits, lay)
+            if walls == 2:
+                (x0, _, y0), (x1, _, y1) = slits
+                assert x1 - x0 - WALL_T >= 0.45 - 1e-6 and (y0 * y1 <= 0), lay
+            else:
+                (top,) = lay["bar_top"]
+                assert 0.08 - 1e-6 <= top <= 0.1, lay
+            gaps.append(slits[0][1])
+            offsets.append(abs(slits[0][2]))
+            sides.add(slits[0][2] > 0)
+        assert 0.55 - 1e-6 <= gaps[0] <= 0.58 + 1e-6 and 0.34 - 1e-6 <= gaps[-1] <= 0.38 + 1e-6, gaps
+        assert offsets[0] <= 0.03 + 1e-6 and 0.36 - 1e-6 <= offsets[-1] <= 0.39 + 1e-6, offsets
+        assert all(b < a + 0.03 for a, b in zip(gaps[:-1], gaps[1:], strict=True)), gaps  # up to the jitter
+        assert all(b > a - 0.03 for a, b in zip(offsets[:-1], offsets[1:], strict=True)), offsets
+    assert sides == {True, False}
+    for d in (0.0, 0.7):  # the paper's variants: the same with and without it
+        a, b = make_typical(kind, d, 2, graded=graded), make_typical(kind, d, 2)
+        assert a.meta["layout"] == b.meta["layout"] and _slit_walls(a) == _slit_walls(b)
+
+
 def test_one_warmup_slit_takes_one_grading():
-    """Side-hurdle's warm-up slit is either moved off the axis or narrowed, never both: refused by name."""
+    """A warm-up slit takes one slit grading (offset, width, or both together): two are refused by name."""
     with pytest.raises(SceneError, match="task.warmup_slit_offset and task.warmup_slit_narrow both grade"):
         Graded(slit_offset=True, slit_narrow=True)
+    match = "task.warmup_slit_narrow and task.warmup_slit_tight both grade side-hurdle-crouch, side-hurdle or side-pass"
+    with pytest.raises(SceneError, match=match):
+        Graded(slit_narrow=True, slit_tight=True)
 
 
 @pytest.mark.parametrize("field", sorted(GRADED_BY))

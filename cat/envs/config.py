@@ -284,6 +284,10 @@ class EnvCfg:
     # (0.90 -> 0.40 m) ahead of the type's easiest paper bar (and ceiling), side-pass's two such slits, so the
     # curriculum grades the side-on turn through a narrow slit (cat.terrain.typical.GRADED_NARROW_GAP; training.md).
     warmup_slit_narrow: bool = False
+    # training aid: those warm-up slits narrow (0.55 -> 0.32 m) as they leave the axis (0 -> 0.40 m, either side;
+    # side-pass's two to opposite sides), so the curriculum grades the paper's narrow off-axis slits, where the
+    # width ladder's cells fail (cat.terrain.graded.GRADED_TIGHT_GAP; training.md). At most one slit grading.
+    warmup_slit_tight: bool = False
     # training aid: add the left/right mirror image of every scene (cat.terrain.Scene.mirrored), so a scene set
     # that is not balanced (eight of the paper's ten side-pass variants open to the left first) cannot teach one
     # handedness only. Real experience on both sides, unlike PPO's symmetry augmentation. Never evaluated.

@@ -24,7 +24,7 @@ from cat.envs.episodes import EpisodeCfg, check_episode_cfg
 from cat.envs.scene_set import SceneSet
 from cat.terrain import NOT_GRADED, TYPICAL_KINDS, Graded, kind_name
 from cat.terrain.data_groups import data_group
-from cat.terrain.typical import GRADED_BARS, graded_kinds
+from cat.terrain.graded import GRADED_BARS, graded_kinds, kinds_text
 
 
 @dataclass(frozen=True)
@@ -102,24 +102,20 @@ def check_scene_task(task: EnvCfg) -> tuple[str | None, list[str]]:
         raise ValueError("task.warmup_bars counts the bars of the graded warm-ups: it needs task.warmup_bar_pitch=true")
     for key, kinds in graded_kinds(graded(task)).items():
         if not set(kinds) & {scene_kind, *groups} or not task.warmup_variants:
-            either = _either(kinds)
+            either = kinds_text(kinds)
             raise ValueError(f"{key} grades {either}'s warm-ups: needs task.scene_kind (or scene_groups) with "
                              f"{either} and task.warmup_variants > 0")  # fmt: skip
     return scene_kind, groups
 
 
-def _either(kinds: tuple[str, ...]) -> str:
-    """``("a", "b", "c")`` as ``a, b or c``."""
-    return " or ".join([", ".join(kinds[:-1]), kinds[-1]] if len(kinds) > 1 else list(kinds))
-
-
 def graded(task: EnvCfg) -> Graded:
     """How ``task``'s warm-ups grade their types (``cat.terrain.typical.Graded``): ``task.warmup_bar_pitch`` with
-    ``task.warmup_bars``, ``task.warmup_slit_offset``, ``task.warmup_slit_narrow``."""
+    ``task.warmup_bars``, ``task.warmup_slit_offset``, ``task.warmup_slit_narrow``, ``task.warmup_slit_tight``."""
     return Graded(
         bars=task.warmup_bars if task.warmup_bar_pitch else 0,
         slit_offset=task.warmup_slit_offset,
         slit_narrow=task.warmup_slit_narrow,
+        slit_tight=task.warmup_slit_tight,
     )
 
 
@@ -185,7 +181,7 @@ def eval_scene_source(
                 raise ValueError(f"warmup=true: the run's task {task.scene_kind!r} has no warm-up scenes")
             for key, kinds in graded_kinds(graded(task)).items():
                 if kind_name(task.scene_kind) not in kinds:
-                    raise ValueError(f"{key} grades {_either(kinds)}'s warm-ups, not {task.scene_kind!r}'s")
+                    raise ValueError(f"{key} grades {kinds_text(kinds)}'s warm-ups, not {task.scene_kind!r}'s")
             return SceneSource(
                 (task.scene_kind,),
                 variants=0,

@@ -43,6 +43,7 @@ NEUTRAL_DEFAULTS = {
     ("task", "warmup_bars"): 2,
     ("task", "warmup_slit_offset"): False,
     ("task", "warmup_slit_narrow"): False,
+    ("task", "warmup_slit_tight"): False,
     ("task", "rewards", "shin_barrier"): 0.0,
     ("task", "rewards", "params", "shin_margin"): 0.02,
     ("task", "rewards", "params", "shin_radius"): 0.045,

@@ -7,13 +7,12 @@ them from there).
 
 from cat.terrain.front3d import Front3DError, load_front3d
 from cat.terrain.furniture import House, make_house
+from cat.terrain.graded import NOT_GRADED, Graded
 from cat.terrain.indoor import IndoorCfg, make_indoor
 from cat.terrain.procedural import ProceduralCfg, make_procedural
 from cat.terrain.scene import GOAL_HEIGHT, Scene, SceneError, check_scene, load_mesh
 from cat.terrain.typical import (
-    NOT_GRADED,
     TYPICAL_KINDS,
-    Graded,
     kind_name,
     make_typical,
     typical_variants,

@@ -31,17 +31,29 @@ placed for it, so the width gives the curriculum its first successes.) They are 
 (``warmup_variants``) that let a difficulty curriculum start where a walking policy already succeeds; the paper's
 variants and every evaluation use d ∈ [0, 1]. ``Graded`` swaps a type's warm-up ramp for a ladder of the skill its
 hard variants need (multi-hurdle: the bar pitch, a third bar; side-hurdle: the slit's offset at a narrow gap;
-side-hurdle-crouch, side-hurdle and side-pass: the slit's width).
+side-hurdle-crouch, side-hurdle and side-pass: the slit's width, or its width and offset together); the ladders
+are specified in ``cat.terrain.graded``.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
 
 import numpy as np
 import trimesh
 
+from cat.terrain.graded import (
+    GRADED_FIRST_BAR,
+    GRADED_GAP,
+    GRADED_NARROW_GAP,
+    GRADED_NARROW_Y,
+    GRADED_SLIT_GAP,
+    GRADED_SLIT_OFFSET,
+    GRADED_TIGHT_GAP,
+    GRADED_TIGHT_OFFSET,
+    NOT_GRADED,
+    Graded,
+)
 from cat.terrain.primitives import bar, box, combine, crop_parts, vcylinder, xz_prism
 from cat.terrain.scene import GOAL_HEIGHT, Scene, SceneError
 
@@ -78,68 +90,6 @@ BAR_TOP_WARMUP = 0.045  # [m]
 BAR_RADIUS_WARMUP = 0.025  # 5 cm wide at 2 cm height, 3 cm at the floor [m]
 BAR_SPAN, CEILING_SPAN = (-1.0, -0.5), (-0.5, 0.0)  # warm-up ranges of d over which bars rise, ceilings drop
 WARMUP = (-1.0, 0.0)  # the whole warm-up range: bars in scenes without a ceiling grow over all of it
-# Graded bar pitch (multi-hurdle warm-ups, ``Graded.bars``): the first bar's near edge and the floor gap between the
-# bars shrink with d from the first to the second value (+ up to 5 cm of jitter each), instead of random gaps.
-# The gap, not the bar height, sets a warm-up's success (docs/multi_hurdle.md, "The bar pitch"); the paper's
-# three-bar variants leave 0.23-0.32 m. With ``Graded.bars=3`` a third bar follows at the same gap wherever it fits on
-# the course (gaps up to ~0.4 m: the last warm-ups), the step from two bars to the paper's three.
-GRADED_FIRST_BAR = (0.70, 0.40)  # [m] from the course origin (the start region ends at x = 0.1)
-GRADED_GAP = (0.85, 0.25)  # [m]
-GRADED_BARS = (0, 2, 3)  # bars of a graded warm-up (0: not graded, random gaps)
-# Graded slit offset (side-hurdle warm-ups, ``Graded.slit_offset``): a slit as narrow as the paper's middle variants
-# (+ up to 5 cm) whose centre moves off the course's axis as d grows, to either side (+ up to 3 cm), ahead of a
-# warm-up bar. The paper's variants put their offsets only on their narrowest slits (``_slit``), where a policy
-# that turns side-on at the wall before lining up with the slit fails (docs/results.md, "Side-hurdle: where the
-# hard variants fail"); here the offset is the only thing that grows.
-GRADED_SLIT_GAP = 0.45  # [m]
-GRADED_SLIT_OFFSET = (0.0, 0.40)  # [m], d = -1 -> 0
-# Graded slit width (side-hurdle-crouch, side-hurdle and side-pass warm-ups, ``Graded.slit_narrow``): a slit near the
-# axis (centre within ``GRADED_NARROW_Y``) narrowing from the paper's widest gap to its narrow ones as d grows (+ up
-# to 3 cm), ahead of what follows the slit in the type's easiest paper variant (d = 0): side-hurdle-crouch's bar and
-# ceiling, side-hurdle's bar; side-pass's two slits are both such slits (near the axis, not offset to opposite
-# sides). The hurdle-crouch lineage passes the paper's slits down to ~0.57 m and none from 0.50 m (docs/results.md,
-# "Side-hurdle-crouch and side-hurdle: could one start the other?"), the side-pass specialist none of its two
-# narrowest pairs (0.39 / 0.32 m); here the slit's width is the only thing that grows. (Not the 4.5 cm warm-up bar:
-# the hurdle-crouch lineage trips on it, 3.5 % of trials passing even the widest slit.)
-GRADED_NARROW_GAP = (0.90, 0.40)  # [m], d = -1 -> 0
-GRADED_NARROW_Y = 0.10  # [m]
-
-
-@dataclass(frozen=True)
-class Graded:
-    """How training-only warm-ups (d < 0) grade a type's hard part, instead of the default ramp: multi-hurdle's
-    bars at a pitch shrinking with d (``bars``: 2, or 3 where they fit; 0: random gaps), side-hurdle's slit moving
-    off the axis at a narrow gap (``slit_offset``), the slit of side-hurdle-crouch and side-hurdle narrowing ahead
-    of the rest of the type's easiest paper variant and side-pass's two slits narrowing near the axis
-    (``slit_narrow``). Each applies to the types ``GRADED_BY`` names only; the paper's variants never change."""
-
-    bars: int = 0
-    slit_offset: bool = False
-    slit_narrow: bool = False
-
-    def __post_init__(self):
-        if self.bars not in GRADED_BARS:
-            raise SceneError(f"graded bars must be one of {GRADED_BARS} (0: random gaps), got {self.bars}")
-        if self.slit_offset and self.slit_narrow:  # both would build side-hurdle's one warm-up slit
-            raise SceneError(
-                f"{GRADED_BY['slit_offset'][1]} and {GRADED_BY['slit_narrow'][1]} both grade side-hurdle's warm-up "
-                "slit: set one"
-            )
-
-
-NOT_GRADED = Graded()
-# The typical types each ``Graded`` field grades, and the task key that turns it on: what both the training set's
-# and the warm-up diagnostic's checks read (cat.envs.scene_source), so another grading is one more row here.
-GRADED_BY = {
-    "bars": (("multi-hurdle",), "task.warmup_bar_pitch"),
-    "slit_offset": (("side-hurdle",), "task.warmup_slit_offset"),
-    "slit_narrow": (("side-hurdle-crouch", "side-hurdle", "side-pass"), "task.warmup_slit_narrow"),
-}
-
-
-def graded_kinds(graded: Graded) -> dict[str, tuple[str, ...]]:
-    """The gradings ``graded`` turns on: its task key -> the typical types whose warm-ups it changes."""
-    return {key: kinds for field, (kinds, key) in GRADED_BY.items() if getattr(graded, field)}
 
 
 def lerp(a: float, b: float, t: float) -> float:
@@ -389,6 +339,16 @@ def _narrow_slit(p: _Params) -> Element:
     return WALL_T, lambda x0: _slit_parts(x0, gap, yc)
 
 
+def _tight_slit(p: _Params, side: float | None = None) -> Element:
+    """A warm-up slit narrowing as it leaves the axis, both with d (``GRADED_TIGHT_GAP``, ``GRADED_TIGHT_OFFSET``),
+    to ``side`` (±1; None: either side, drawn)."""
+    t = p.d - WARMUP[0]
+    gap = p.note("slit_gap", lerp(*GRADED_TIGHT_GAP, t) + p.rng.uniform(0.0, 0.03))
+    side = float(p.rng.choice([-1.0, 1.0])) if side is None else side
+    yc = p.note("slit_y", side * (lerp(*GRADED_TIGHT_OFFSET, t) + p.rng.uniform(0.0, 0.03)))
+    return WALL_T, lambda x0: _slit_parts(x0, gap, yc)
+
+
 def _bar_and_ceiling(p: _Params) -> list[Element]:
     """Side-hurdle-crouch's bar and ceiling, after its slit."""
     return [_bar(p), _ceiling(p, (0.25, 0.4))]
@@ -421,12 +381,16 @@ def _layout(kind: str, p: _Params) -> list[trimesh.Trimesh]:
     if kind == "side-hurdle-crouch":
         if p.graded.slit_narrow and p.d < 0:
             return _sequence([_narrow_slit(p), *_easiest(p, _bar_and_ceiling)], p)
+        if p.graded.slit_tight and p.d < 0:
+            return _sequence([_tight_slit(p), *_easiest(p, _bar_and_ceiling)], p)
         return _sequence([_slit(p), *_bar_and_ceiling(p)], p)
     if kind == "side-hurdle":
         if p.graded.slit_offset and p.d < 0:
             return _sequence([_offset_slit(p), *_warmup_bar(p)], p)
         if p.graded.slit_narrow and p.d < 0:
             return _sequence([_narrow_slit(p), *_easiest(p, _warmup_bar)], p)
+        if p.graded.slit_tight and p.d < 0:
+            return _sequence([_tight_slit(p), *_easiest(p, _warmup_bar)], p)
         return _sequence([_slit(p), *_warmup_bar(p)], p)
     if kind == "side-crouch":
         return _sequence([_low_door(p)], p)
@@ -437,6 +401,9 @@ def _layout(kind: str, p: _Params) -> list[trimesh.Trimesh]:
     if kind == "side-pass":
         if p.graded.slit_narrow and p.d < 0:
             return _sequence([_narrow_slit(p), _narrow_slit(p)], p, min_gap=0.45)
+        if p.graded.slit_tight and p.d < 0:
+            side = float(p.rng.choice([-1.0, 1.0]))
+            return _sequence([_tight_slit(p, side), _tight_slit(p, -side)], p, min_gap=0.45)
         off = p(0.2, 0.45) * p.rng.choice([-1.0, 1.0])
         return _sequence([_slit(p, yc=off), _slit(p, yc=-off)], p, min_gap=0.45)
     if kind == "multi-hurdle":

@@ -10,7 +10,9 @@ run trained on more), ``mirror=true`` (their left/right mirror images), ``sim=``
 ``falls=true`` (then ``falls=<n>/<N> fall_time_s=<q25>/<median>/<q75> fall_progress_median=<x>
 falls_without_contact=<k>``: when the falls came, how far along the way, how many before any contact),
 ``paths=<file.csv>`` (each trial's root path in its scene's frame, step by step: ``cat.eval.paths.COLUMNS``),
-``warmup=true`` (the run's training-only warm-up scenes instead of the paper's: where its curriculum stands).
+``warmup=true`` (the run's training-only warm-up scenes instead of the paper's: where its curriculum stands;
+``warmup_pitch=true|false`` / ``warmup_slit=offset|narrow|tight|none`` play another grading of them than the run's).
+With ``by_scene=true`` and ``contacts=true`` each scene's line also names its first-contact bodies.
 Prints one line: ``episodes=<n> success_rate=<x> distance_error=<m> collision_rate=<x> fall_rate=<x>``.
 """
 
@@ -30,7 +32,7 @@ from cat.learning.runs import CheckpointError
 def _job(cfg: PlayCfg) -> int:
     played = play_trials(cfg)
     if cfg.by_scene:
-        print("\n".join(scene_lines(played.trials, played.results, played.scenes)))
+        print("\n".join(scene_lines(played.trials, played.results, played.scenes, played.first_contacts)))
     if played.first_contacts is not None:
         print(contact_line(played.first_contacts))
     if played.clearance is not None:

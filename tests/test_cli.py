@@ -140,6 +140,8 @@ def tiny_run(tmp_path_factory):
         (["record=/no/such/folder/x.rrd"], "does not exist"),
         (["time_s=0"], "time_s must be > 0"),
         (["warmup_pitch=true"], "warmup_pitch= chooses the warm-up layout: it needs warmup=true"),
+        (["warmup_slit=tight"], "warmup_slit= chooses the warm-up layout: it needs warmup=true"),
+        (["warmup=true", "warmup_slit=wide"], "warmup_slit='wide': valid: offset, narrow, tight, none"),
     ],
 )
 def test_play_refuses_bad_values(tiny_run, caplog, args, needle):

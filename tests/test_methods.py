@@ -16,12 +16,14 @@ import yaml
 from cat.envs.config import EnvCfg
 from cat.envs.field_source import FieldSample
 from cat.envs.mdp import rewards as rew
+from cat.envs.scene_source import graded
 from cat.envs.trial_metrics import TrialResult, summarize
 from cat.eval.manifest import ManifestError, load_manifest
 from cat.eval.runner import run_scene_group
 from cat.learning.hydra_cfg import ConfigError, load_config
-from cat.learning.play import PlayCfg, play, play_trials, scene_lines
+from cat.learning.play import PlayCfg, play, play_trials, scene_lines, slit_grading_keys
 from cat.learning.runs import load_run_config, make_env, resume_config, train
+from cat.terrain import Graded
 from cat.terrain.typical import make_typical, warmup_variants
 
 METHODS = ("ours", "wo_obs_field", "wo_r_field", "astraversal", "humanoid_parkour")
@@ -187,6 +189,25 @@ def test_play_by_scene_lines_add_up_to_the_summary(method_runs):
         f"x:{lay['x'][0]:.2f}"
     )
     assert len(lines) == 2
+    first = [None, "left_wrist_yaw_link", "left_wrist_yaw_link", "torso_link"]  # contacts=true: each scene's own
+    lines = scene_lines(trials, results, [scenes[0], other], first)
+    assert lines[0].endswith(" first_contact=left_wrist_yaw_link:2")
+    assert lines[1].endswith(" first_contact=torso_link:1")
+
+
+def test_play_chooses_the_slit_grading_of_the_warmups():
+    """play.py warmup_slit=: the task keys of one slit grading on, the others off (none: all off); the warm-ups
+    built from them are that grading's."""
+    task = EnvCfg(scene_kind="side-hurdle", warmup_variants=2, warmup_slit_narrow=True)
+    for name, field in (("offset", "slit_offset"), ("narrow", "slit_narrow"), ("tight", "slit_tight")):
+        chosen = replace(task, **slit_grading_keys(name))
+        assert graded(chosen) == Graded(**{field: True}), name
+        group = run_scene_group(chosen, warmup=True)
+        expect = warmup_variants("side-hurdle", 2, 0, Graded(**{field: True}))
+        assert [s.meta["layout"] for s in group.scenes] == [s.meta["layout"] for s in expect], name
+    assert graded(replace(task, **slit_grading_keys("none"))) == Graded()
+    with pytest.raises(ValueError, match="warmup_slit='both': valid: offset, narrow, tight, none"):
+        slit_grading_keys("both")
 
 
 def test_play_on_the_warmup_scenes(method_runs):

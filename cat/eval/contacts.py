@@ -68,8 +68,12 @@ def contact_line(first: list[str | None]) -> str:
     """``first_contact=<body>:<trials>,...`` (most frequent first) over the trials with a contact, e.g.
     ``first_contact=left_ankle_roll_link:53,right_knee_link:2 trials_with_contact=55/60``."""
     hits = [b for b in first if b is not None]
-    counts = ",".join(f"{b}:{k}" for b, k in Counter(hits).most_common())
-    return f"first_contact={counts or 'none'} trials_with_contact={len(hits)}/{len(first)}"
+    return f"first_contact={contact_counts(first)} trials_with_contact={len(hits)}/{len(first)}"
+
+
+def contact_counts(first: list[str | None]) -> str:
+    """``<body>:<trials>,...`` over the trials with a contact, most frequent first (``none``: no contact)."""
+    return ",".join(f"{b}:{k}" for b, k in Counter(b for b in first if b is not None).most_common()) or "none"
 
 
 class Clearance:

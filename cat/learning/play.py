@@ -16,13 +16,14 @@ from typing import NamedTuple
 from tqdm import tqdm
 
 from cat.envs.trial_metrics import Summary, TrialResult, summarize
-from cat.eval.contacts import Clearance, FirstContacts
+from cat.eval.contacts import Clearance, FirstContacts, contact_counts
 from cat.eval.falls import Falls
 from cat.eval.paths import Paths, write_paths
 from cat.eval.runner import EvalCfg, make_eval_env, run_scene_group, run_trials
 from cat.eval.trials import Trial, first_trials, flat_trials, scene_trials
 from cat.learning.runs import load_run_config, resolve_checkpoint
 from cat.run.policy import MirrorAveraged, load_policy
+from cat.terrain.graded import GRADED_BY, SLIT_GRADINGS
 from cat.terrain.scene import Scene, layout_text
 
 log = logging.getLogger(__name__)
@@ -45,6 +46,9 @@ class PlayCfg:
     by_scene: bool = False  # scripts/play.py also prints one line per evaluated scene (where a policy fails)
     warmup: bool = False  # the run's training-only warm-up scenes (d < 0) instead: curriculum progress, diagnostic
     warmup_pitch: bool | None = None  # with warmup: multi-hurdle's graded-pitch warm-ups (None: as the run trained)
+    # with warmup: the side types' warm-up slit grading to play (cat.terrain.graded.SLIT_GRADINGS without ``slit_``:
+    # offset | narrow | tight; none: the default ramp; "": as the run trained), e.g. a cell on a ladder it never saw
+    warmup_slit: str = ""
     contacts: bool = False  # scripts/play.py also prints which body touched first (cat.eval.contacts)
     clearance: bool = False  # ... and the success rate at contact-depth tolerances (cat.eval.contacts.Clearance)
     falls: bool = False  # scripts/play.py also prints when the falls came and how far along (cat.eval.falls)
@@ -70,19 +74,35 @@ def play(cfg: PlayCfg) -> Summary:
     return summarize(play_trials(cfg).results)
 
 
-def scene_lines(trials: list[Trial], results: list[TrialResult], scenes: list[Scene] | None) -> list[str]:
-    """One line per evaluated scene: ``scene=<i> kind=<k> difficulty=<d>``, its trials' summary and, for a typical
-    scene, its layout (``layout=slit_gap:0.49,slit_y:-0.30,bar_top:0.18,x:0.67/1.15``; cat.terrain.typical)."""
+def scene_lines(
+    trials: list[Trial],
+    results: list[TrialResult],
+    scenes: list[Scene] | None,
+    first_contacts: list[str | None] | None = None,
+) -> list[str]:
+    """One line per evaluated scene: ``scene=<i> kind=<k> difficulty=<d>``, its trials' summary, for a typical
+    scene its layout (``layout=slit_gap:0.49,slit_y:-0.30,bar_top:0.18,x:0.67/1.15``; cat.terrain.typical) and,
+    given each trial's first-contact bodies, the scene's (``first_contact=left_wrist_yaw_link:4,...``)."""
     lines = []
     for i in sorted({t.scene for t in trials}):
-        own = [r for t, r in zip(trials, results, strict=True) if t.scene == i]
+        own = [k for k, t in enumerate(trials) if t.scene == i]
         kind, d = (scenes[i].kind, float(scenes[i].difficulty)) if scenes is not None else ("flat", 0.0)
-        line = f"scene={i} kind={kind} difficulty={d:.2f} {summarize(own).line()}"
+        line = f"scene={i} kind={kind} difficulty={d:.2f} {summarize([results[k] for k in own]).line()}"
         layout = scenes[i].meta.get("layout") if scenes is not None else None
         if layout:
             line += f" layout={layout_text(layout)}"
+        if first_contacts is not None:
+            line += f" first_contact={contact_counts([first_contacts[k] for k in own])}"
         lines.append(line)
     return lines
+
+
+def slit_grading_keys(name: str) -> dict[str, bool]:
+    """The task keys that turn on the slit grading ``name`` (``offset``, ``narrow``, ``tight``; ``none``: all off)."""
+    names = [f.removeprefix("slit_") for f in SLIT_GRADINGS]
+    if name not in (*names, "none"):
+        raise ValueError(f"warmup_slit={name!r}: valid: {', '.join(names)}, none")
+    return {GRADED_BY[f][1].removeprefix("task."): f == f"slit_{name}" for f in SLIT_GRADINGS}
 
 
 def play_trials(cfg: PlayCfg) -> Played:
@@ -97,6 +117,10 @@ def play_trials(cfg: PlayCfg) -> Played:
         if not cfg.warmup:
             raise ValueError("warmup_pitch= chooses the warm-up layout: it needs warmup=true")
         task = replace(task, warmup_bar_pitch=cfg.warmup_pitch)
+    if cfg.warmup_slit:
+        if not cfg.warmup:
+            raise ValueError("warmup_slit= chooses the warm-up layout: it needs warmup=true")
+        task = replace(task, **slit_grading_keys(cfg.warmup_slit))
     if cfg.scene_variants is not None:
         if cfg.scene_variants < 1:
             raise ValueError(f"scene_variants must be >= 1, got {cfg.scene_variants}")

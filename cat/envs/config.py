@@ -271,18 +271,18 @@ class EnvCfg:
     warmup_variants: int = 0
     # training aid: multi-hurdle's warm-ups place their two bars at a floor gap shrinking with d (0.85 -> 0.25 m)
     # instead of random gaps, so the curriculum's levels are ordered by the pitch that sets their success
-    # (cat.terrain.typical.GRADED_GAP; docs/multi_hurdle.md). Needs multi-hurdle among the kinds and warm-ups.
+    # (cat.terrain.graded.GRADED_GAP; docs/multi_hurdle.md). Needs multi-hurdle among the kinds and warm-ups.
     warmup_bar_pitch: bool = False
     # with warmup_bar_pitch: 3 puts a third bar at the warm-up's gap wherever three fit on the course (the last
     # warm-ups, gaps up to ~0.4 m), a step between the graded pairs and the paper's three-bar variants.
     warmup_bars: int = 2
     # training aid: side-hurdle's warm-ups hold a narrow slit (0.45 m) whose centre moves off the course's axis as d
     # grows (0 -> 0.4 m, either side), so the curriculum grades lining up with an offset slit, which the paper's
-    # variants only ask at their narrowest gaps (cat.terrain.typical.GRADED_SLIT_OFFSET; docs/results.md).
+    # variants only ask at their narrowest gaps (cat.terrain.graded.GRADED_SLIT_OFFSET; docs/results.md).
     warmup_slit_offset: bool = False
     # training aid: side-hurdle-crouch's and side-hurdle's warm-ups hold a slit near the axis narrowing as d grows
     # (0.90 -> 0.40 m) ahead of the type's easiest paper bar (and ceiling), side-pass's two such slits, so the
-    # curriculum grades the side-on turn through a narrow slit (cat.terrain.typical.GRADED_NARROW_GAP; training.md).
+    # curriculum grades the side-on turn through a narrow slit (cat.terrain.graded.GRADED_NARROW_GAP; training.md).
     warmup_slit_narrow: bool = False
     # training aid: those warm-up slits narrow (0.55 -> 0.32 m) as they leave the axis (0 -> 0.40 m, either side;
     # side-pass's two to opposite sides), so the curriculum grades the paper's narrow off-axis slits, where the

@@ -109,7 +109,7 @@ def check_scene_task(task: EnvCfg) -> tuple[str | None, list[str]]:
 
 
 def graded(task: EnvCfg) -> Graded:
-    """How ``task``'s warm-ups grade their types (``cat.terrain.typical.Graded``): ``task.warmup_bar_pitch`` with
+    """How ``task``'s warm-ups grade their types (``cat.terrain.graded.Graded``): ``task.warmup_bar_pitch`` with
     ``task.warmup_bars``, ``task.warmup_slit_offset``, ``task.warmup_slit_narrow``, ``task.warmup_slit_tight``."""
     return Graded(
         bars=task.warmup_bars if task.warmup_bar_pitch else 0,

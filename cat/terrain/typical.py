@@ -326,10 +326,7 @@ def _graded_bars(p: _Params) -> list[trimesh.Trimesh]:
 
 def _offset_slit(p: _Params) -> Element:
     """A warm-up slit ``GRADED_SLIT_GAP`` wide whose centre leaves the axis as d grows (``GRADED_SLIT_OFFSET``)."""
-    gap = p.note("slit_gap", GRADED_SLIT_GAP + p.rng.uniform(0.0, 0.05))
-    side = float(p.rng.choice([-1.0, 1.0]))
-    yc = p.note("slit_y", side * (lerp(*GRADED_SLIT_OFFSET, p.d - WARMUP[0]) + p.rng.uniform(0.0, 0.03)))
-    return WALL_T, lambda x0: _slit_parts(x0, gap, yc)
+    return _off_axis_slit(p, GRADED_SLIT_GAP, 0.05, lerp(*GRADED_SLIT_OFFSET, p.d - WARMUP[0]))
 
 
 def _narrow_slit(p: _Params) -> Element:
@@ -343,9 +340,15 @@ def _tight_slit(p: _Params, side: float | None = None) -> Element:
     """A warm-up slit narrowing as it leaves the axis, both with d (``GRADED_TIGHT_GAP``, ``GRADED_TIGHT_OFFSET``),
     to ``side`` (±1; None: either side, drawn)."""
     t = p.d - WARMUP[0]
-    gap = p.note("slit_gap", lerp(*GRADED_TIGHT_GAP, t) + p.rng.uniform(0.0, 0.03))
+    return _off_axis_slit(p, lerp(*GRADED_TIGHT_GAP, t), 0.03, lerp(*GRADED_TIGHT_OFFSET, t), side)
+
+
+def _off_axis_slit(p: _Params, gap: float, gap_jitter: float, offset: float, side: float | None = None) -> Element:
+    """A warm-up slit ``gap`` wide (+ up to ``gap_jitter``) whose centre is ``offset`` off the axis (+ up to 3 cm)
+    to ``side`` (±1; None: either, drawn): the graded offset and tight ladders' slit."""
+    gap = p.note("slit_gap", gap + p.rng.uniform(0.0, gap_jitter))
     side = float(p.rng.choice([-1.0, 1.0])) if side is None else side
-    yc = p.note("slit_y", side * (lerp(*GRADED_TIGHT_OFFSET, t) + p.rng.uniform(0.0, 0.03)))
+    yc = p.note("slit_y", side * (offset + p.rng.uniform(0.0, 0.03)))
     return WALL_T, lambda x0: _slit_parts(x0, gap, yc)
 
 
